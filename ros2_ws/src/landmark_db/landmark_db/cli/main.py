@@ -1,0 +1,78 @@
+"""``vbn``: the view-based navigation command line.
+
+Subcommands are contributed by the project's packages through the ``vbn.commands``
+entry-point group. Each entry point names a ``register(subparsers)`` function that
+adds one subparser and sets its ``func`` default to a ``run(args) -> int``
+callable. Command modules keep heavy imports inside ``run`` so that ``vbn --help``
+stays fast.
+"""
+from __future__ import annotations
+
+import argparse
+from importlib import metadata
+import logging
+import sys
+from typing import Sequence
+
+from landmark_db import __version__
+from landmark_db.errors import VbnError
+
+__all__ = ['build_parser', 'main']
+
+_LOG = logging.getLogger(__name__)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Build the ``vbn`` parser with every installed subcommand.
+
+    Returns:
+        The top-level parser; subcommands are sorted by name.
+    """
+    parser = argparse.ArgumentParser(
+        prog='vbn',
+        description='View-based robot navigation: build a landmark database from an '
+                    'exploration bag and localize against it (ROS 2 Jazzy).',
+    )
+    parser.add_argument('--version', action='version', version=f'vbn {__version__}')
+    parser.add_argument('-v', '--verbose', action='store_true', help='log at DEBUG level')
+    subparsers = parser.add_subparsers(title='commands', dest='command', metavar='COMMAND')
+    entry_points = sorted(metadata.entry_points(group='vbn.commands'), key=lambda e: e.name)
+    seen: set[str] = set()
+    for entry_point in entry_points:
+        if entry_point.name in seen:  # the same package found twice on sys.path
+            continue
+        seen.add(entry_point.name)
+        register = entry_point.load()
+        register(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``vbn`` and return its exit code.
+
+    A ``VbnError`` or an ``OSError`` (missing file, permission) becomes one line on
+    stderr and exit code 2; Ctrl-C exits with 130.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if args.verbose else logging.INFO,
+        format='%(levelname)s %(name)s: %(message)s',
+    )
+    if not getattr(args, 'func', None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except VbnError as error:
+        print(f'vbn {args.command}: error: {error}', file=sys.stderr)
+        return 2
+    except OSError as error:
+        print(f'vbn {args.command}: error: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,31 @@
+"""Install the visibility_builder package (ament_python)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'visibility_builder'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='View-based navigation maintainers',
+    maintainer_email='maintainers@view-based-navigation.invalid',
+    description='Offline builder, renderer and bag tools for view-based navigation.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'dds_probe = visibility_builder.dds_probe:main',
+        ],
+        'vbn.commands': [
+            'doctor = visibility_builder.cli.doctor:register',
+        ],
+    },
+)

@@ -1,0 +1,1 @@
+"""``vbn`` subcommands contributed by visibility_builder (see ``landmark_db.cli.main``)."""
