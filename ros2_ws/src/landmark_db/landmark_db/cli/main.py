@@ -9,10 +9,10 @@ stays fast.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from importlib import metadata
 import logging
 import sys
-from typing import Sequence
 
 from landmark_db import __version__
 from landmark_db.errors import VbnError

@@ -1,0 +1,52 @@
+"""The colcon workspace is laid out so that ros2 run finds every executable."""
+from __future__ import annotations
+
+from pathlib import Path
+import xml.etree.ElementTree as ET
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+WS = ROOT / 'ros2_ws'
+PACKAGES = ('landmark_db', 'visibility_builder', 'landmark_localizer')
+EXECUTABLES = {'landmark_db': ['vbn'], 'visibility_builder': ['dds_probe']}
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_package_manifest_is_format_3_ament_python(package):
+    root = ET.parse(WS / 'src' / package / 'package.xml').getroot()
+    assert root.get('format') == '3'
+    assert root.findtext('name') == package
+    assert root.find('export/build_type').text == 'ament_python'
+    assert (WS / 'src' / package / 'resource' / package).is_file()
+    setup_cfg = (WS / 'src' / package / 'setup.cfg').read_text()
+    assert f'install_scripts=$base/lib/{package}' in setup_cfg
+
+
+@pytest.mark.parametrize('package', PACKAGES)
+def test_colcon_installed_the_package_into_the_ament_index(package):
+    marker = WS / 'install' / package / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    assert (marker / package).is_file()
+    assert (WS / 'install' / package / 'share' / package / 'package.xml').is_file()
+
+
+@pytest.mark.parametrize(('package', 'name'),
+                         [(p, e) for p, names in EXECUTABLES.items() for e in names])
+def test_executables_are_in_lib_package(package, name):
+    exe = WS / 'install' / package / 'lib' / package / name
+    assert exe.is_file()
+    assert exe.stat().st_mode & 0o111
+
+
+def test_package_cores_do_not_import_rclpy():
+    # Only ROS glue may import rclpy or message packages; cores stay pure Python.
+    glue = {'dds_probe.py', 'node.py'}
+    offenders = []
+    for package in PACKAGES:
+        for path in (WS / 'src' / package / package).rglob('*.py'):
+            if path.name in glue or 'ros_tools' in path.parts or 'cli' in path.parts:
+                continue
+            text = path.read_text()
+            if 'import rclpy' in text or 'from rclpy' in text or '_msgs.msg import' in text:
+                offenders.append(str(path.relative_to(WS)))
+    assert offenders == []
