@@ -1,6 +1,6 @@
 # View-based navigation: setup, tests and the demo. Every target installs what it needs.
 SHELL := /bin/bash
-.SHELLFLAGS := -eu -o pipefail -c
+.SHELLFLAGS := -e -o pipefail -c
 PYTHON ?= python3
 ROOT := $(CURDIR)
 VENV := $(ROOT)/.venv
