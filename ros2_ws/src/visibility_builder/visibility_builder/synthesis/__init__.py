@@ -1,0 +1,33 @@
+"""Bag synthesis: exploration grids, run trajectories, odometry and bag writing (issue 4).
+
+Core modules (no rclpy): :mod:`.grid` (exploration poses), :mod:`.trajectory`
+(smooth runs, kidnapped variant), :mod:`.odometry` (wheel odometry with seeded
+drift). :mod:`.messages` converts to ROS 2 messages (rosbags types) and
+:mod:`.bags` writes the bags through :mod:`visibility_builder.bag_io`.
+"""
+from __future__ import annotations
+
+from visibility_builder.synthesis.grid import exploration_poses, wall_clearance
+from visibility_builder.synthesis.odometry import (
+    OdometryNoise,
+    OdometryTrack,
+    simulate_odometry,
+)
+from visibility_builder.synthesis.trajectory import (
+    RunParameters,
+    Trajectory,
+    kidnapped_trajectory,
+    run_trajectory,
+)
+
+__all__ = [
+    'OdometryNoise',
+    'OdometryTrack',
+    'RunParameters',
+    'Trajectory',
+    'exploration_poses',
+    'kidnapped_trajectory',
+    'run_trajectory',
+    'simulate_odometry',
+    'wall_clearance',
+]

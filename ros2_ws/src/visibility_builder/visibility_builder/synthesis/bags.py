@@ -1,0 +1,281 @@
+"""Turn renders into rosbag2 MCAP bags: exploration, run and kidnapped run (issue 4).
+
+Topics and frames (fixed by the design):
+
+==============================  =============================  ==========================
+topic                           type                           when
+==============================  =============================  ==========================
+``/camera/image_raw``           ``sensor_msgs/Image``          every image (raw)
+``/camera/image_raw/compressed`` ``sensor_msgs/CompressedImage`` every image (compressed)
+``/camera/camera_info``         ``sensor_msgs/CameraInfo``     every image
+``/ground_truth/pose``          ``geometry_msgs/PoseStamped``  every image, frame ``map``
+``/odom``                       ``nav_msgs/Odometry``          runs, 50 Hz, frame ``odom``
+``/tf``                         ``tf2_msgs/TFMessage``         see below
+``/tf_static``                  ``tf2_msgs/TFMessage``         once, ``base_link -> camera``
+==============================  =============================  ==========================
+
+``/tf`` holds ``map -> base_link`` (ground truth) at every image of an exploration
+bag. In a run bag it holds ``odom -> base_link`` with every odometry message and
+``map -> odom`` at every image, chosen so that ``map -> odom -> base_link`` is the
+ground truth at the image times (a perfect localizer's output). Images, camera
+info and ground truth carry frame ``camera`` / ``map`` and the same stamp as
+their bag time; every header stamp equals the message's bag timestamp.
+
+Exploration: the robot stops at every pose of :func:`~.grid.exploration_poses`
+(one per second) and records one panorama at yaw 0, or four pinhole images at
+headings 0, 90, 180 and 270 degrees (0.25 s apart, turning in place), like the
+thesis's Room 408 data set (Section 8.3.2). Runs: :mod:`.trajectory`, images at
+10 Hz, odometry from :mod:`.odometry` at 50 Hz.
+
+Everything is deterministic in the scene, the seed and the parameters: the bag
+clock starts at :data:`START_NS`, and every random draw comes from a generator
+seeded with ``seed`` (and the frame index, for per-frame image effects).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+import logging
+import math
+from pathlib import Path
+
+import numpy as np
+
+from landmark_db.scene import Scene
+from visibility_builder.bag_io import BagWriter, default_qos
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.render.camera import make_camera
+from visibility_builder.render.effects import ImageEffects
+from visibility_builder.render.frames import compose_poses, invert_pose
+from visibility_builder.render.renderer import Renderer
+from visibility_builder.synthesis import messages
+from visibility_builder.synthesis.grid import exploration_poses
+from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
+from visibility_builder.synthesis.trajectory import (
+    RunParameters,
+    Trajectory,
+    kidnapped_trajectory,
+    run_trajectory,
+)
+
+__all__ = ['KINDS', 'START_NS', 'BagSpec', 'BagSummary', 'write_bag']
+
+_LOG = logging.getLogger(__name__)
+
+#: Bag clock origin: 2025-01-01T00:00:00Z, so that bags do not depend on the wall clock.
+START_NS = 1_735_689_600 * 1_000_000_000
+KINDS = ('exploration', 'run', 'run-kidnapped')
+IMAGE_PERIOD_NS = 100_000_000  # 10 Hz
+ODOM_PERIOD_NS = 20_000_000  # 50 Hz
+POSE_PERIOD_NS = 1_000_000_000  # exploration: one grid pose per second
+HEADING_PERIOD_NS = 250_000_000  # pinhole exploration: four headings per pose
+
+
+@dataclass(frozen=True)
+class BagSpec:
+    """What to synthesise.
+
+    Attributes:
+        kind: ``'exploration'``, ``'run'`` or ``'run-kidnapped'``.
+        camera: ``'panoramic'`` or ``'pinhole'``.
+        width: image width, pixels (``None``: the camera's default).
+        height: image height, pixels (``None``: the camera's default).
+        hfov_deg: pinhole horizontal field of view, degrees.
+        spacing: exploration grid spacing, metres.
+        clearance: minimum distance from an exploration pose to a wall, metres.
+        seed: seeds odometry noise and image effects.
+        encoding: ``'bgr8'`` or ``'mono8'``.
+        compression: ``None`` (``sensor_msgs/Image`` on ``/camera/image_raw``) or
+            ``'jpeg'``/``'png'`` (``sensor_msgs/CompressedImage`` on
+            ``/camera/image_raw/compressed``).
+        jpeg_quality: JPEG quality, 1..100.
+        effects: per-frame exposure, blur and noise.
+        run: planning and timing of runs.
+        duration: cut runs after this many seconds (``None``: the whole path).
+        odometry_noise: wheel-odometry error model.
+    """
+
+    kind: str = 'exploration'
+    camera: str = 'panoramic'
+    width: int | None = None
+    height: int | None = None
+    hfov_deg: float = 90.0
+    spacing: float = 0.25
+    clearance: float = 0.2
+    seed: int = 0
+    encoding: str = 'bgr8'
+    compression: str | None = None
+    jpeg_quality: int = 90
+    effects: ImageEffects = field(default_factory=ImageEffects)
+    run: RunParameters = field(default_factory=RunParameters)
+    duration: float | None = None
+    odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+
+    def check(self) -> None:
+        """Raise :class:`VisibilityBuilderError` for an invalid field."""
+        if self.kind not in KINDS:
+            raise VisibilityBuilderError(f'unknown bag kind {self.kind!r} '
+                                         f'(expected {", ".join(KINDS)})')
+        if self.encoding not in ('bgr8', 'mono8'):
+            raise VisibilityBuilderError(f'unknown encoding {self.encoding!r} '
+                                         '(expected bgr8 or mono8)')
+        if self.compression not in (None, 'jpeg', 'png'):
+            raise VisibilityBuilderError(f'unknown compression {self.compression!r} '
+                                         '(expected jpeg or png)')
+        if not 1 <= int(self.jpeg_quality) <= 100:
+            raise VisibilityBuilderError(f'JPEG quality must be 1..100, got {self.jpeg_quality}')
+        if not (math.isfinite(self.spacing) and self.spacing > 0):
+            raise VisibilityBuilderError(f'spacing must be positive, got {self.spacing}')
+        if self.seed < 0:
+            raise VisibilityBuilderError(f'seed must be non-negative, got {self.seed}')
+
+
+@dataclass
+class BagSummary:
+    """What a synthesised bag holds.
+
+    Attributes:
+        path: the bag directory.
+        counts: messages per topic.
+        duration_s: time from the first to the last message, seconds.
+        images: number of images.
+    """
+
+    path: Path
+    counts: dict[str, int]
+    duration_s: float
+    images: int
+
+
+class _Bag:
+    """A BagWriter with the topics of a synthesised bag and per-topic counts."""
+
+    def __init__(self, writer: BagWriter, compressed: bool, run: bool) -> None:
+        self.writer = writer
+        self.counts: dict[str, int] = {}
+        self.image_topic = '/camera/image_raw/compressed' if compressed else '/camera/image_raw'
+        image_type = 'sensor_msgs/msg/CompressedImage' if compressed else 'sensor_msgs/msg/Image'
+        reliable = [default_qos()]
+        topics = [(self.image_topic, image_type, reliable),
+                  ('/camera/camera_info', 'sensor_msgs/msg/CameraInfo', reliable),
+                  ('/ground_truth/pose', 'geometry_msgs/msg/PoseStamped', reliable),
+                  ('/tf', 'tf2_msgs/msg/TFMessage', [default_qos(depth=100)]),
+                  ('/tf_static', 'tf2_msgs/msg/TFMessage',
+                   [default_qos(durability='transient_local', depth=1)])]
+        if run:
+            topics.append(('/odom', 'nav_msgs/msg/Odometry', [default_qos(depth=50)]))
+        self.connections = {topic: writer.add_topic(topic, msgtype, qos)
+                            for topic, msgtype, qos in topics}
+
+    def write(self, topic: str, stamp_ns: int, message: object) -> None:
+        self.writer.write(self.connections[topic], stamp_ns, message)
+        self.counts[topic] = self.counts.get(topic, 0) + 1
+
+
+def _camera_frames(spec: BagSpec, scene: Scene) -> Iterator[tuple[int, np.ndarray]]:
+    """Yield ``(stamp_ns, base pose)`` of every exploration image."""
+    positions = exploration_poses(scene, spec.spacing, spec.clearance)
+    headings = [0.0] if spec.camera == 'panoramic' else [0.0, 0.5 * math.pi, math.pi,
+                                                           1.5 * math.pi]
+    for i, (x, y) in enumerate(positions):
+        for h, heading in enumerate(headings):
+            yaw = math.remainder(heading, 2 * math.pi)
+            yield START_NS + i * POSE_PERIOD_NS + h * HEADING_PERIOD_NS, np.array([x, y, yaw])
+
+
+def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
+              progress: Callable[[int, int], None] | None = None) -> BagSummary:
+    """Render ``scene`` and write the bag that ``spec`` describes to ``out``.
+
+    Args:
+        scene: the scene.
+        spec: the bag's kind, camera and parameters.
+        out: bag directory to create (must not exist).
+        progress: called as ``progress(images_done, images_total)``.
+
+    Returns:
+        The summary of what was written.
+
+    Raises:
+        VisibilityBuilderError: invalid parameters, an existing ``out`` or a scene
+            that leaves no room for the robot.
+    """
+    spec.check()
+    out = Path(out)
+    if out.exists():
+        raise VisibilityBuilderError(f'{out} exists already, not overwriting')
+    camera = make_camera(spec.camera, spec.width, spec.height, spec.hfov_deg)
+    # Plan before opening the bag: bad input must leave nothing behind.
+    if spec.kind == 'exploration':
+        frames = list(_camera_frames(spec, scene))
+        trajectory = None
+    else:
+        trajectory = run_trajectory(scene, spec.run, spec.duration)
+        if spec.kind == 'run-kidnapped':
+            trajectory = kidnapped_trajectory(trajectory)
+        frames = []
+    renderer = Renderer(scene, camera)
+    info = camera.camera_info()
+    with BagWriter(out) as writer:
+        bag = _Bag(writer, spec.compression is not None, trajectory is not None)
+        bag.write('/tf_static', START_NS, messages.tf_message(
+            [messages.camera_static_transform(START_NS, scene.camera_height)]))
+
+        def write_image(index: int, stamp: int, pose: np.ndarray) -> None:
+            rng = np.random.default_rng([spec.seed, index])
+            image = renderer.render(pose, encoding=spec.encoding, effects=spec.effects,
+                                    rng=rng).image
+            if spec.compression is None:
+                message = messages.image_message(stamp, image)
+            else:
+                message = messages.compressed_image_message(stamp, image, spec.compression,
+                                                            spec.jpeg_quality)
+            bag.write(bag.image_topic, stamp, message)
+            bag.write('/camera/camera_info', stamp, messages.camera_info_message(stamp, info))
+            bag.write('/ground_truth/pose', stamp, messages.pose_stamped_message(stamp, pose))
+
+        if trajectory is None:
+            for index, (stamp, pose) in enumerate(frames):
+                write_image(index, stamp, pose)
+                bag.write('/tf', stamp, messages.tf_message(
+                    [messages.planar_transform(stamp, 'map', 'base_link', pose)]))
+                if progress:
+                    progress(index + 1, len(frames))
+            images = len(frames)
+        else:
+            images = _write_run(bag, trajectory, spec, write_image, progress)
+    duration = 0.0
+    if trajectory is not None:
+        duration = math.floor(trajectory.duration / 0.02 + 1e-9) * 0.02
+    elif frames:
+        duration = (frames[-1][0] - START_NS) / 1e9
+    _LOG.info('wrote %s: %d images, %.1f s', out, images, duration)
+    return BagSummary(out, dict(sorted(bag.counts.items())), duration, images)
+
+
+def _write_run(bag: _Bag, trajectory: Trajectory, spec: BagSpec,
+               write_image: Callable[[int, int, np.ndarray], None],
+               progress: Callable[[int, int], None] | None) -> int:
+    odom = simulate_odometry(trajectory, 1e9 / ODOM_PERIOD_NS, spec.odometry_noise,
+                             np.random.default_rng([spec.seed, 1_000_003]))
+    n_odom = len(odom.times)
+    per_image = IMAGE_PERIOD_NS // ODOM_PERIOD_NS
+    n_images = (n_odom - 1) // per_image + 1
+    ground_truth = trajectory.pose_at(np.arange(n_images) * IMAGE_PERIOD_NS / 1e9)
+    for k in range(n_odom):  # time order: odometry, then the image at the same stamp
+        stamp = START_NS + k * ODOM_PERIOD_NS
+        bag.write('/odom', stamp, messages.odometry_message(
+            stamp, odom.poses[k], odom.twist[k], odom.pose_variance[k], odom.twist_variance))
+        transforms = [messages.planar_transform(stamp, 'odom', 'base_link', odom.poses[k])]
+        if k % per_image == 0:
+            i = k // per_image
+            # map -> odom such that map -> odom -> base_link is the ground truth now.
+            map_to_odom = compose_poses(ground_truth[i], invert_pose(odom.poses[k]))
+            transforms.insert(0, messages.planar_transform(stamp, 'map', 'odom', map_to_odom))
+            bag.write('/tf', stamp, messages.tf_message(transforms))
+            write_image(i, stamp, ground_truth[i])
+            if progress:
+                progress(i + 1, n_images)
+        else:
+            bag.write('/tf', stamp, messages.tf_message(transforms))
+    return n_images

@@ -1,0 +1,71 @@
+"""Wheel odometry with seeded drift."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from visibility_builder.render.frames import compose_poses, wrap_angle
+from visibility_builder.scenes import resolve_scene
+from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
+from visibility_builder.synthesis.trajectory import kidnapped_trajectory, run_trajectory
+
+
+@pytest.fixture(scope='module')
+def run():
+    return run_trajectory(resolve_scene('room'))
+
+
+def _errors(run, odom):
+    truth = run.pose_at(odom.times)
+    estimate = compose_poses(odom.odom_origin, odom.poses)
+    return (np.linalg.norm(estimate[:, :2] - truth[:, :2], axis=1),
+            np.abs(wrap_angle(estimate[:, 2] - truth[:, 2])))
+
+
+def test_noise_free_odometry_follows_ground_truth(run):
+    odom = simulate_odometry(run, 50.0, OdometryNoise.none())
+    assert odom.times[1] - odom.times[0] == pytest.approx(0.02)
+    assert odom.poses[0] == pytest.approx([0, 0, 0])
+    position, yaw = _errors(run, odom)
+    assert position.max() < 1e-3
+    assert yaw.max() < 1e-6
+    # the measured twist is the true body velocity
+    assert np.abs(odom.twist[:, 0]).max() == pytest.approx(np.abs(run.velocity[:, 0]).max(),
+                                                          rel=0.05)
+
+
+def test_odometry_is_seeded(run):
+    a = simulate_odometry(run, rng=3)
+    b = simulate_odometry(run, rng=3)
+    c = simulate_odometry(run, rng=4)
+    assert np.array_equal(a.poses, b.poses)
+    assert not np.array_equal(a.poses, c.poses)
+
+
+def test_drift_grows_with_distance_and_stays_realistic(run):
+    quarter, half, end = [], [], []
+    for seed in range(24):
+        position, _ = _errors(run, simulate_odometry(run, rng=seed))
+        n = len(position)
+        quarter.append(position[n // 4])
+        half.append(position[n // 2])
+        end.append(position[-1])
+    assert np.mean(quarter) < np.mean(end)
+    assert np.mean(half) < np.mean(end)
+    assert np.mean(end) > 0.05  # there is drift
+    travelled = np.sum(np.abs(run.velocity[:-1, 0]) * np.diff(run.times))
+    assert np.mean(end) < 0.1 * travelled  # a few percent of the distance driven
+    # the reported variance grows along the run
+    odom = simulate_odometry(run, rng=0)
+    assert np.all(np.diff(odom.pose_variance[:, 0]) >= 0)
+    assert odom.pose_variance[-1, 0] > odom.pose_variance[10, 0]
+
+
+def test_kidnapping_leaves_no_trace_in_odometry(run):
+    kid = kidnapped_trajectory(run)
+    odom = simulate_odometry(kid, rng=0)
+    steps = np.linalg.norm(np.diff(odom.poses[:, :2], axis=0), axis=1)
+    assert steps.max() < 0.02  # 50 Hz at <= 0.4 m/s: continuous, even across the teleport
+    position, _ = _errors(kid, odom)
+    at = np.searchsorted(odom.times, kid.teleport_time)
+    assert position[at + 5] > position[at - 5] + 1.0  # the ground truth jumped away
