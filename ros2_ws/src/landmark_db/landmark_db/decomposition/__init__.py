@@ -1,0 +1,148 @@
+"""Region decomposition: rho-MORDP through 0-MORDP (Chapters 3 to 5 of the thesis).
+
+``decompose(world, algorithm, k, rho, sigma)`` reduces the instance to 0-MORDP
+(Theorem 4.1, :mod:`.overlap`), runs one algorithm on it and expands the regions back
+(Theorem 4.2). Algorithms, one module each:
+
+======== =========================================== ==============================
+name     what                                        module
+======== =========================================== ==============================
+A1 A2 A3 grow regions from seeds (Figure 5.1)        :mod:`.grow_regions`
+B1 B2    shrink regions until k features (Fig. 5.2)  :mod:`.shrink_regions`
+C        neighbourhood-seeded regions (Figure 5.3)   :mod:`.neighbourhood_seeds`
+exact    optimum by set cover + HiGHS MILP           :mod:`.exact`
+best     candidate pool + set cover (new heuristic)  :mod:`.best`
+======== =========================================== ==============================
+
+Shared rules (sigma rule of Section 5.5, disconnected pieces, ties) live in
+:mod:`.problem`; redundancy elimination (Section 5.4) in :mod:`.redundancy`;
+the validator in :mod:`.validate`.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from landmark_db.decomposition.model import (
+    Decomposition,
+    Region,
+    load_decomposition,
+    save_decomposition,
+)
+from landmark_db.decomposition.overlap import (
+    covered_poses,
+    expand_region,
+    neighbourhood_matrix,
+)
+from landmark_db.decomposition.problem import ZeroProblem, zero_problem
+from landmark_db.decomposition.validate import validate
+from landmark_db.errors import LandmarkDbError
+from landmark_db.world import WorldInstance
+
+__all__ = [
+    'ALGORITHMS',
+    'Decomposition',
+    'Region',
+    'decompose',
+    'load_decomposition',
+    'save_decomposition',
+    'validate',
+]
+
+ALGORITHMS = ('A1', 'A2', 'A3', 'B1', 'B2', 'C', 'exact', 'best')
+
+_LOG = logging.getLogger(__name__)
+
+
+def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = 0, sigma: int = 0,
+              alpha: float = 0.85, rng: Any = None, **options: Any) -> Decomposition:
+    """Decompose a world into regions with k-feature landmarks (rho-MORDP).
+
+    Args:
+        world: the world instance.
+        algorithm: one of :data:`ALGORITHMS`.
+        k: features per landmark (>= 1).
+        rho: overlap radius in graph steps (>= 0).
+        sigma: a region is added only if it covers more than sigma otherwise
+            uncovered poses (>= 0; Section 5.5).
+        alpha: algorithm C's least unassigned fraction of N_r(v), in (0, 1].
+        rng: ``numpy.random.Generator`` or seed for tie-breaking; None means seed 0.
+        **options: passed to ``exact`` (``time_limit``, ``max_subsets``,
+            ``max_candidates``) or ``best`` (``time_limit``, ``rounds``).
+
+    Returns:
+        The decomposition, in original pose indices and feature ids. ``uncovered``
+        lists the k-coverable poses (on the rho-reduced sets) that no region covers
+        with their whole N_rho; ``seconds`` includes the reduction and expansion.
+
+    Raises:
+        LandmarkDbError: on an unknown algorithm or out-of-range parameter, or when
+            ``exact`` refuses the instance.
+
+    Example:
+        >>> import numpy as np
+        >>> from landmark_db.world import grid_world
+        >>> world = grid_world(3, 1, 0.5, np.array([[1, 1], [1, 1], [1, 0]], bool))
+        >>> d = decompose(world, 'B2', k=1)
+        >>> [r.poses.tolist() for r in d.regions], [r.features.tolist() for r in d.regions]
+        ([[0, 1, 2]], [[0]])
+    """
+    if algorithm not in ALGORITHMS:
+        raise LandmarkDbError(f'unknown algorithm {algorithm!r}; choose one of '
+                              f'{", ".join(ALGORITHMS)}')
+    k = _check_int(k, 'k', 1)
+    rho = _check_int(rho, 'rho', 0)
+    sigma = _check_int(sigma, 'sigma', 0)
+    if isinstance(alpha, bool) or not isinstance(alpha, (int, float)) or \
+            not math.isfinite(alpha) or not 0 < alpha <= 1:
+        raise LandmarkDbError(f'alpha must be in (0, 1], got {alpha!r}')
+    generator = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(
+        0 if rng is None else rng)
+    start = time.perf_counter()
+    problem = zero_problem(world, k, rho, sigma, generator)
+    reduced = _run(problem, algorithm, float(alpha), options) if problem.coverable.any() \
+        else []
+    hood = neighbourhood_matrix(world.adjacency, rho) if rho else None
+    regions = []
+    for poses, cols in reduced:
+        expanded = expand_region(hood, poses) if hood is not None else poses
+        regions.append(Region(expanded, world.feature_ids[np.sort(cols)]))
+    if hood is None:
+        covered = np.zeros(world.n_poses, dtype=bool)
+        for region in regions:
+            covered[region.poses] = True
+    else:
+        covered = covered_poses(hood, [region.poses for region in regions])
+    uncovered = np.flatnonzero(problem.coverable & ~covered)
+    seconds = time.perf_counter() - start
+    _LOG.debug('%s: %d regions, %d uncovered, %.3f s', algorithm, len(regions),
+               uncovered.size, seconds)
+    return Decomposition(algorithm, k, rho, sigma, seconds, regions, uncovered)
+
+
+def _run(problem: ZeroProblem, algorithm: str, alpha: float,
+         options: dict[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
+    if algorithm in ('A1', 'A2', 'A3'):
+        from landmark_db.decomposition.grow_regions import grow_regions
+        return grow_regions(problem, algorithm)
+    if algorithm in ('B1', 'B2'):
+        from landmark_db.decomposition.shrink_regions import shrink_regions
+        return shrink_regions(problem, algorithm)
+    if algorithm == 'C':
+        from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
+        return neighbourhood_seeds(problem, alpha)
+    if algorithm == 'exact':
+        from landmark_db.decomposition.exact import exact_cover
+        return exact_cover(problem, **options)
+    from landmark_db.decomposition.best import best_cover
+    return best_cover(problem, alpha=alpha, **options)
+
+
+def _check_int(value: Any, name: str, least: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise LandmarkDbError(f'{name} must be an integer >= {least}, got {value!r}')
+    return int(value)

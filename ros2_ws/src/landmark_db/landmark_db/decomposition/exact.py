@@ -1,0 +1,185 @@
+"""Exact optimum of 0-MORDP as a minimum set cover (new; the thesis's future work).
+
+Any region R of a decomposition has a landmark L (k features seen from all of R), and
+R, being connected, lies inside one connected component of {v : L subset of F_v}.
+Replacing every region by that component keeps the decomposition valid and its size
+unchanged. So an optimum 0-MORDP decomposition is a minimum set cover of the
+k-coverable poses by the *maximal candidate regions*: the connected components of
+{v : L subset of F_v} over all k-subsets L of features seen together somewhere
+(every such L is a k-subset of some F_v). The cover is solved as a 0/1 integer
+program with SciPy's HiGHS (``scipy.optimize.milp``); identical rows (poses lying in
+exactly the same candidates) are merged first.
+
+Under rho > 0 the same runs on the reduced instance (Theorem 4.1) and expands back
+(Theorem 4.2), which preserves optimality. The optimum is that of the *complete*
+decomposition: sigma does not apply (``uncovered`` is empty), so approximation ratios
+should be measured against heuristics run with sigma = 0.
+
+Refusals (``LandmarkDbError``): more than ``max_subsets`` candidate landmarks
+(sum over poses of C(|F~_v|, k)), more than ``max_candidates`` candidate regions, or
+no proven optimum within ``time_limit`` seconds.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, milp
+import scipy.sparse as sp
+
+from landmark_db.decomposition.problem import ZeroProblem, split_components
+from landmark_db.errors import LandmarkDbError
+
+__all__ = ['candidate_regions', 'exact_cover', 'solve_set_cover']
+
+MAX_SUBSETS = 200_000
+MAX_CANDIDATES = 50_000
+
+
+def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
+                      max_candidates: int = MAX_CANDIDATES,
+                      ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Enumerate the maximal candidate regions of a 0-MORDP instance.
+
+    Returns:
+        Distinct (sorted poses, k landmark columns) pairs, one per connected component
+        of {v : L subset of F~_v} over all k-subsets L seen together somewhere.
+
+    Raises:
+        LandmarkDbError: when the enumeration would exceed the limits.
+    """
+    k = problem.k
+    rows = np.flatnonzero(problem.coverable)
+    total = sum(math.comb(int(c), k) for c in problem.counts[rows])
+    if total > max_subsets:
+        raise LandmarkDbError(
+            f'exact solver refused: {total} candidate landmarks (k-subsets of visibility '
+            f'sets) exceed the limit of {max_subsets}; use a smaller world or k')
+    subsets: set[tuple[int, ...]] = set()
+    for v in rows:
+        subsets.update(itertools.combinations(problem.row_features(int(v)).tolist(), k))
+    masks = {}
+    for col in {c for subset in subsets for c in subset}:
+        bits = np.zeros(problem.n_poses, dtype=np.uint8)
+        bits[problem.column_poses(col)] = 1
+        masks[col] = int.from_bytes(np.packbits(bits, bitorder='little').tobytes(), 'little')
+    pose_sets: dict[int, tuple[int, ...]] = {}
+    for subset in sorted(subsets):
+        mask = masks[subset[0]]
+        for col in subset[1:]:
+            mask &= masks[col]
+        pose_sets.setdefault(mask, subset)
+    candidates: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+    n_bytes = (problem.n_poses + 7) // 8
+    for mask, subset in pose_sets.items():
+        bits = np.unpackbits(np.frombuffer(mask.to_bytes(n_bytes, 'little'), dtype=np.uint8),
+                             bitorder='little')
+        poses = np.flatnonzero(bits[:problem.n_poses]).astype(np.int64)
+        for piece in split_components(problem.adjacency, poses):
+            key = piece.tobytes()
+            if key not in candidates:
+                candidates[key] = (piece, np.asarray(subset, dtype=np.int64))
+                if len(candidates) > max_candidates:
+                    raise LandmarkDbError(
+                        f'exact solver refused: more than {max_candidates} candidate '
+                        f'regions; use a smaller world or k')
+    return list(candidates.values())
+
+
+def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
+                    time_limit: float | None = None,
+                    budget: int | None = None) -> tuple[np.ndarray, bool]:
+    """Solve a minimum set cover of ``required`` poses with HiGHS.
+
+    Without ``budget``: min |C| such that every required pose lies in a chosen set.
+    With ``budget``: a partial cover, min |C| such that at most ``budget`` required
+    poses are left uncovered (ties go to the cover leaving fewer uncovered); ``best``
+    uses this to cover at least as many poses as B.2 does under sigma.
+
+    Args:
+        n_poses: number of poses.
+        required: sorted poses to cover.
+        sets: sorted pose index arrays (the candidate regions).
+        time_limit: seconds for HiGHS, or None for no limit.
+        budget: most required poses that may stay uncovered, or None for none.
+
+    Returns:
+        (indices of the chosen sets, whether HiGHS proved the choice optimal).
+
+    Raises:
+        LandmarkDbError: if a required pose lies in no set (beyond ``budget``), or
+            HiGHS found no feasible solution in time.
+    """
+    if budget is not None and budget <= 0:
+        budget = None
+    if required.size == 0 or not sets:
+        if required.size > (budget or 0):
+            raise LandmarkDbError('set cover infeasible: no candidate sets')
+        return np.zeros(0, dtype=np.int64), True
+    sizes = np.array([s.size for s in sets], dtype=np.int64)
+    row_index = np.full(n_poses, -1, dtype=np.int64)
+    row_index[required] = np.arange(required.size)
+    flat = np.concatenate(sets)
+    cols = np.repeat(np.arange(len(sets)), sizes)
+    keep = row_index[flat] >= 0
+    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
+                           shape=(required.size, len(sets)))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    empty_rows = np.diff(matrix.indptr) == 0
+    if empty_rows.any():
+        n_empty = int(empty_rows.sum())
+        if n_empty > (budget or 0):
+            bad = required[np.flatnonzero(empty_rows)[0]]
+            raise LandmarkDbError(f'set cover infeasible: pose {int(bad)} lies in no candidate')
+        budget = None if budget is None else budget - n_empty
+        matrix = matrix[np.flatnonzero(~empty_rows)]
+    # Merge poses lying in exactly the same candidates: their rows are identical.
+    signatures: dict[bytes, int] = {}
+    weights: dict[bytes, int] = {}
+    for r in range(matrix.shape[0]):
+        key = matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes()
+        signatures.setdefault(key, r)
+        weights[key] = weights.get(key, 0) + 1
+    matrix = matrix[np.fromiter(signatures.values(), dtype=np.int64)]
+    n_sets, n_rows = len(sets), matrix.shape[0]
+    cost = np.ones(n_sets)
+    constraints = [LinearConstraint(matrix, lb=1, ub=np.inf)]
+    if budget:
+        row_weight = np.fromiter((weights[key] for key in signatures), dtype=float)
+        matrix = sp.hstack([matrix, sp.identity(n_rows, format='csr')]).tocsr()
+        cost = np.concatenate([cost, row_weight / (row_weight.sum() + 1.0)])
+        limit = sp.csr_matrix(np.concatenate([np.zeros(n_sets), row_weight])[None, :])
+        constraints = [LinearConstraint(matrix, lb=1, ub=np.inf),
+                       LinearConstraint(limit, lb=0, ub=float(budget))]
+    options = {'disp': False}
+    if time_limit is not None:
+        options['time_limit'] = float(time_limit)
+    result = milp(c=cost, constraints=constraints, integrality=np.ones(cost.size),
+                  bounds=Bounds(0, 1), options=options)
+    if result.x is None:
+        raise LandmarkDbError(f'set cover: HiGHS found no cover ({result.message})')
+    chosen = np.flatnonzero(result.x[:n_sets] > 0.5)
+    return chosen, bool(result.status == 0)
+
+
+def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,
+                max_subsets: int = MAX_SUBSETS,
+                max_candidates: int = MAX_CANDIDATES) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Return an optimum 0-MORDP decomposition (complete cover, sigma ignored).
+
+    Raises:
+        LandmarkDbError: when the instance is too large (see the module docstring).
+    """
+    required = np.flatnonzero(problem.coverable)
+    if required.size == 0:
+        return []
+    candidates = candidate_regions(problem, max_subsets, max_candidates)
+    chosen, optimal = solve_set_cover(problem.n_poses, required,
+                                      [poses for poses, _ in candidates], time_limit)
+    if not optimal:
+        raise LandmarkDbError(
+            f'exact solver: HiGHS did not prove optimality within {time_limit:g} s '
+            f'({len(candidates)} candidate regions)')
+    return [candidates[i] for i in chosen]
