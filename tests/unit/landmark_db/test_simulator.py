@@ -10,8 +10,8 @@ import pytest
 
 from landmark_db.errors import LandmarkDbError
 from landmark_db.scene import Scene, SceneFeatures, points_in_polygon
-from landmark_db.simulator.pose_grid import pose_grid, wall_distance
-from landmark_db.simulator.random_scene import inward_normals, random_scene
+from landmark_db.simulator.grid import pose_grid, wall_distance
+from landmark_db.simulator.scene_sampler import inward_normals, random_scene
 from landmark_db.simulator.settings import SETTINGS, get_setting, small_setting
 from landmark_db.simulator.simulate import simulate_world, world_rng
 from landmark_db.simulator.visibility import compute_visibility, segments_blocked

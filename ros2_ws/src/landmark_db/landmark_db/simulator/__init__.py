@@ -1,13 +1,13 @@
 """The synthetic world simulator of Chapter 8 (Sections 8.1 and 8.2).
 
-Random polygon worlds per experiment setting (:mod:`.settings`, :mod:`.random_scene`),
-their pose grid (:mod:`.pose_grid`), the vectorised feature visibility
+Random polygon worlds per experiment setting (:mod:`.settings`, :mod:`.scene_sampler`),
+their pose grid (:mod:`.grid`), the vectorised feature visibility
 (:mod:`.visibility`) and the composition into a world instance (:mod:`.simulate`).
 """
 from __future__ import annotations
 
-from landmark_db.simulator.pose_grid import pose_grid
-from landmark_db.simulator.random_scene import random_scene
+from landmark_db.simulator.grid import pose_grid
+from landmark_db.simulator.scene_sampler import random_scene
 from landmark_db.simulator.settings import SETTINGS, WorldSetting, get_setting, small_setting
 from landmark_db.simulator.visibility import compute_visibility
 

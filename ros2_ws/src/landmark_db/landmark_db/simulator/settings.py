@@ -8,8 +8,12 @@ unstated, and this module fixes them, each with its reason:
   angular range ``N(25, 3)`` degrees; Type 2 range ``N(0.65, 0.2)`` to ``N(17.5, 2)``
   m, angular range ``N(45, 4)`` degrees. ``N(mu, s)`` has standard deviation ``s``.
   The thesis does not say whether the angular range is the full aperture of the
-  visibility cone or its half-angle about the wall normal; :data:`ANGLE_IS_HALF_APERTURE`
-  records the reading used (see its comment for the evidence).
+  visibility cone or its half-angle about the wall normal. We read it as the **full
+  aperture** (a Type 1 feature is seen within about 12.5 degrees of its normal), as
+  :class:`~landmark_db.scene.SceneFeatures` defines ``angular_extent_deg``: at the
+  Table 8.4 visibility counts this reading reproduces Table 8.3's region sizes, while
+  the half-angle reading gives regions about twice as large (docs/simulator.md).
+  :attr:`FeatureType.angle_is_half_aperture` switches the reading.
 * **Shape classes**: rectangular worlds (axis-aligned rectangular perimeter and
   obstacles; obstacle count from ``{U(6, 9) p=.5; N(10, 2) p=.5}``) and irregular
   worlds (perimeter sides from ``{U(4, 4) p=.1; N(5, .5) p=.45; N(7, 2) p=.45}``,
@@ -17,9 +21,10 @@ unstated, and this module fixes them, each with its reason:
   the obstacles' side counts for irregular worlds: they reuse the perimeter's
   side-count mixture.
 * **Size**: "an average diameter of 40 m". Rectangular worlds have sides of
-  ``N(40, 3)`` m and irregular worlds a vertex radius of about 20 m. This makes the
-  pose count of rectangular worlds about 1.6 times that of irregular ones, the ratio
-  that Tables 8.2 x 8.3 imply (total poses in regions, 9122 vs 5794 for Type 1 and
+  ``N(40, 3)`` m; irregular worlds a vertex radius ``R`` of ``N(22.5, 1.5)`` m with
+  each vertex at ``U(0.8, 1) R`` (a diameter of about 40 m). This makes the pose
+  count of rectangular worlds about 1.7 times that of irregular ones, near the ratio
+  that Tables 8.2 x 8.3 imply (summed region sizes, 9122 vs 5794 for Type 1 and
   11780 vs 7240 for Type 2).
 * **Obstacle size** (not given): a vertex radius (half-diagonal for rectangles) of
   ``U(1, 3)`` m, at least :attr:`ShapeClass.clearance` metres from every other wall.
@@ -35,15 +40,8 @@ import numpy as np
 
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['ANGLE_IS_HALF_APERTURE', 'FeatureType', 'Mixture', 'SETTINGS', 'ShapeClass',
+__all__ = ['FeatureType', 'Mixture', 'SETTINGS', 'ShapeClass',
            'WorldSetting', 'get_setting', 'small_setting']
-
-# The thesis's "angular range" read as the half-angle of the visibility cone about the
-# wall normal (so a Type 1 feature's full aperture is about 50 degrees); the scene's
-# ``angular_extent_deg`` is the full aperture, twice the drawn value. docs/simulator.md
-# gives the evidence for this reading.
-ANGLE_IS_HALF_APERTURE = True
-
 
 @dataclass(frozen=True)
 class Mixture:
@@ -90,6 +88,8 @@ class FeatureType:
         range_max: distribution of the maximum visibility distance, metres.
         angular_range_deg: distribution of the thesis's angular range, degrees.
         density_per_m: features per metre of wall (calibrated, see module docstring).
+        angle_is_half_aperture: read ``angular_range_deg`` as the cone's half-angle
+            instead of its full aperture (not the default; see module docstring).
     """
 
     name: str
@@ -97,6 +97,7 @@ class FeatureType:
     range_max: Mixture
     angular_range_deg: Mixture
     density_per_m: float
+    angle_is_half_aperture: bool = False
 
 
 @dataclass(frozen=True)
@@ -159,13 +160,13 @@ IRREGULAR = ShapeClass(
     perimeter_sides=_IRREGULAR_SIDES,
     obstacle_count=Mixture((('U', 5, 9, 0.5), ('N', 8, 2, 0.5))),
     obstacle_sides=_IRREGULAR_SIDES,
-    size_m=_normal(21.0, 1.5),
+    size_m=_normal(22.5, 1.5),
 )
 
 # Densities (features per metre of wall) calibrated with
 # ``vbn bench-decomposition --calibrate`` so that the mean count of features visible
 # per pose matches Table 8.4; the measured means are in docs/simulator.md.
-_DENSITY = {1: 4.0, 2: 4.0, 3: 4.0, 4: 4.0}
+_DENSITY = {1: 6.8, 2: 7.0, 3: 8.3, 4: 7.9}
 
 
 def _type1(density: float) -> FeatureType:
@@ -198,28 +199,34 @@ def get_setting(number: int) -> WorldSetting:
 
 
 def small_setting(setting: WorldSetting, scale: float = 0.25,
-                  density_scale: float = 0.25) -> WorldSetting:
-    """Return a reduced-size variant of ``setting`` (for the exact solver and tests).
+                  density_scale: float | None = None) -> WorldSetting:
+    """Return a reduced-size variant of ``setting``, small enough for the exact solver.
 
-    The world's size, obstacle sizes and feature ranges are scaled by ``scale``, so
-    the geometry looks like the full-size setting seen from further away; the
-    obstacle count by ``scale`` (at least 1); the feature density by
-    ``density_scale``, which keeps the per-pose counts and the candidate-region count
-    small enough for the exact set-cover solver.
+    The world's size and obstacle count are scaled by ``scale`` (0.25 gives worlds
+    about 10 m across with one or two obstacles); obstacle sizes and clearances by
+    ``2 x scale`` (at least 0.5 m, so the 0.5 m grid still passes between them);
+    feature ranges by ``2 x scale``; the feature density by ``density_scale``
+    (default 0.5 for Type 1 and 0.25 for Type 2 features), which gives about 11-19
+    features visible per pose, few enough k-subsets for the exact set cover.
 
     Args:
         setting: the full-size setting.
         scale: linear scale factor in ``(0, 1]``.
-        density_scale: factor on the feature density.
+        density_scale: factor on the feature density, or None for the default.
 
     Returns:
-        A new setting with ``number`` kept and ``label`` marked as small.
+        A new setting with the same ``number`` and a label marked as small.
+
+    Raises:
+        LandmarkDbError: if ``scale`` is out of range.
     """
     if not 0 < scale <= 1:
         raise LandmarkDbError(f'scale must be in (0, 1], got {scale}')
+    if density_scale is None:
+        density_scale = 0.5 if setting.features.name == 'Type 1' else 0.25
 
     def scaled(mixture: Mixture, factor: float) -> Mixture:
-        return Mixture(tuple((kind, a * factor, b * factor if kind == 'U' else b * factor, w)
+        return Mixture(tuple((kind, a * factor, b * factor, w)
                              for kind, a, b, w in mixture.components))
 
     shape = setting.shape

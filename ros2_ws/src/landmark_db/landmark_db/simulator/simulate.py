@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from landmark_db.scene import Scene
-from landmark_db.simulator.pose_grid import pose_grid
-from landmark_db.simulator.random_scene import random_scene
+from landmark_db.simulator.grid import pose_grid
+from landmark_db.simulator.scene_sampler import random_scene
 from landmark_db.simulator.settings import WorldSetting, get_setting
 from landmark_db.simulator.visibility import compute_visibility
 from landmark_db.world import WorldInstance

@@ -9,11 +9,11 @@ For a cone with its apex at the feature, the whole segment lies in the cone exac
 when the pose does; the ring condition is applied to the pose's distance (the
 segment always starts at the feature, inside ``range_min``).
 
-The computation is vectorised in two passes:
+The computation is vectorised in two passes over spatial tiles of poses:
 
-1. the cone and range test over poses x features (cheap, in chunks of poses);
+1. the cone and range test over the tile's poses x the features in range of it;
 2. the occlusion test only for the pairs that pass, as a batched segment-segment
-   intersection against every wall segment (in chunks of pairs).
+   intersection against the wall segments near the tile (in chunks of pairs).
 
 A segment that only touches the feature's own wall at the feature is not blocked; a
 segment that grazes an obstacle corner is.
@@ -31,12 +31,19 @@ _PAIR_CHUNK_CELLS = 8_000_000  # pairs x walls per chunk of the occlusion pass
 _T_EPS = 1e-9
 
 
-def compute_visibility(scene: Scene, poses: np.ndarray) -> np.ndarray:
+def compute_visibility(scene: Scene, poses: np.ndarray, tile: float = 8.0) -> np.ndarray:
     """Tell which scene features are visible from which poses.
+
+    Poses are processed in square tiles of ``tile`` metres; for each tile only the
+    features within range of its bounding box, and only the walls whose bounding box
+    meets the box spanned by the tile and those features, are tested. No segment from
+    a pose of the tile to one of those features can leave that box, so the result is
+    the same as testing every wall; the culling only makes large worlds fast.
 
     Args:
         scene: the polygon world with its features.
         poses: ``(n, 2)`` pose coordinates, metres (assumed in free space).
+        tile: tile side, metres.
 
     Returns:
         ``visible  # (n_poses, n_features) bool``, column ``j`` for
@@ -49,23 +56,45 @@ def compute_visibility(scene: Scene, poses: np.ndarray) -> np.ndarray:
     if n == 0 or f == 0:
         return visible
     starts, ends, _ = scene.wall_segments()
+    wall_lo = np.minimum(starts, ends)
+    wall_hi = np.maximum(starts, ends)
     own_wall = feature_walls(scene)
     position = features.positions
     normal = features.normals
     cos_half = np.cos(np.radians(np.clip(features.angular_extent_deg, 0.0, 360.0) / 2))
     rmin, rmax = features.range_min, features.range_max
-    step = max(1, _POSE_CHUNK_CELLS // f)
-    for lo in range(0, n, step):
-        chunk = poses[lo:lo + step]
-        offset = chunk[:, None, :] - position[None, :, :]  # (c, f, 2) feature -> pose
-        dist = np.hypot(offset[..., 0], offset[..., 1])
-        along_normal = offset[..., 0] * normal[:, 0] + offset[..., 1] * normal[:, 1]
-        candidate = (dist >= rmin) & (dist <= rmax) & (along_normal >= cos_half * dist)
-        candidate &= dist > 0
-        rows, cols = np.nonzero(candidate)
-        blocked = segments_blocked(chunk[rows], position[cols], starts, ends,
-                                   skip_wall=own_wall[cols])
-        visible[lo + rows[~blocked], cols[~blocked]] = True
+    cell = np.floor((poses - poses.min(axis=0)) / tile).astype(np.int64)
+    key = cell[:, 1] * (int(cell[:, 0].max()) + 1) + cell[:, 0]
+    order = np.argsort(key, kind='stable')
+    bounds = np.flatnonzero(np.diff(key[order])) + 1
+    for members in np.split(order, bounds):
+        tile_poses = poses[members]
+        lo, hi = tile_poses.min(axis=0), tile_poses.max(axis=0)
+        # Features whose range reaches the tile's box.
+        gap = np.maximum(np.maximum(lo - position, position - hi), 0.0)
+        near = np.flatnonzero(np.hypot(gap[:, 0], gap[:, 1]) <= rmax)
+        if near.size == 0:
+            continue
+        box_lo = np.minimum(lo, position[near].min(axis=0))
+        box_hi = np.maximum(hi, position[near].max(axis=0))
+        walls = np.flatnonzero(np.all(wall_lo <= box_hi, axis=1)
+                               & np.all(wall_hi >= box_lo, axis=1))
+        wall_map = np.full(len(starts), -1, dtype=np.int64)
+        wall_map[walls] = np.arange(walls.size)
+        step = max(1, _POSE_CHUNK_CELLS // near.size)
+        for lo_index in range(0, members.size, step):
+            rows_global = members[lo_index:lo_index + step]
+            chunk = poses[rows_global]
+            offset = chunk[:, None, :] - position[None, near, :]  # feature -> pose
+            dist = np.hypot(offset[..., 0], offset[..., 1])
+            along_normal = offset[..., 0] * normal[near, 0] + offset[..., 1] * normal[near, 1]
+            candidate = ((dist >= rmin[near]) & (dist <= rmax[near]) & (dist > 0)
+                         & (along_normal >= cos_half[near] * dist))
+            rows, cols = np.nonzero(candidate)
+            cols = near[cols]
+            blocked = segments_blocked(chunk[rows], position[cols], starts[walls], ends[walls],
+                                       skip_wall=wall_map[own_wall[cols]])
+            visible[rows_global[rows[~blocked]], cols[~blocked]] = True
     return visible
 
 

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from landmark_db.scene import Scene, SceneFeatures, points_in_polygon
-from landmark_db.simulator.settings import ANGLE_IS_HALF_APERTURE, ShapeClass, WorldSetting
+from landmark_db.simulator.settings import ShapeClass, WorldSetting
 
 __all__ = ['inward_normals', 'place_features', 'random_scene', 'segment_distance']
 
@@ -86,7 +86,7 @@ def place_features(scene: Scene, setting: WorldSetting,
     positions = starts[wall] + direction * offset[:, None]
     kind = setting.features
     angle = np.clip(kind.angular_range_deg.sample(rng, count), 1.0, 179.0)
-    aperture = 2.0 * angle if ANGLE_IS_HALF_APERTURE else angle
+    aperture = 2.0 * angle if kind.angle_is_half_aperture else angle
     aperture = np.minimum(aperture, 179.0)
     range_min = np.clip(kind.range_min.sample(rng, count), 0.0, None)
     range_max = np.maximum(kind.range_max.sample(rng, count), range_min + 0.5)

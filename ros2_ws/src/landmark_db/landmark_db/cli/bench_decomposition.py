@@ -1,0 +1,202 @@
+"""``vbn bench-decomposition``: reproduce the thesis's Tables 8.2-8.4 and Figure 8.3."""
+from __future__ import annotations
+
+import argparse
+import logging
+
+__all__ = ['register', 'run']
+
+_LOG = logging.getLogger(__name__)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``bench-decomposition`` subcommand."""
+    parser = subparsers.add_parser(
+        'bench-decomposition',
+        help='benchmark the decomposition algorithms on random worlds (Tables 8.2-8.4)',
+        description='Generate random worlds of the four settings of thesis Section 8.2, '
+                    'decompose each with A1, A2, A3, B1, B2, C and best (k=4, rho=1, '
+                    'sigma=9, alpha=0.85), validate every decomposition, and print our '
+                    "Tables 8.2-8.4 beside the thesis's, the time per algorithm, the "
+                    'improvement of best over B2 and, on reduced-size worlds, every '
+                    "heuristic's approximation ratio against the exact optimum. Writes "
+                    'results.json, results.csv, tables.txt and PNG figures into --out. '
+                    'Exits 1 if any decomposition fails validation.',
+    )
+    parser.add_argument('--worlds', type=int, default=300,
+                        help='worlds per setting (default: 300, as in the thesis)')
+    parser.add_argument('--settings', default='1,2,3,4',
+                        help='comma-separated setting numbers (default: 1,2,3,4)')
+    parser.add_argument('--out', default='bench-decomposition', metavar='DIR',
+                        help='output directory (default: ./bench-decomposition)')
+    parser.add_argument('--seed', type=int, default=0,
+                        help='base seed: world i of setting s is `vbn simulate --setting s '
+                             '--seed SEED+i` (default: 0)')
+    parser.add_argument('--processes', type=int, default=2,
+                        help='worker processes (default: 2); results do not depend on it')
+    parser.add_argument('--small-worlds', type=int, default=10,
+                        help='reduced-size worlds per setting for the approximation ratios '
+                             'against the exact optimum (default: 10; 0 skips)')
+    parser.add_argument('--reduced', action='store_true',
+                        help='run the main tables on reduced-size worlds too (quick check)')
+    parser.add_argument('--algorithms', default='A1,A2,A3,B1,B2,C,best',
+                        help='comma-separated algorithms (default: A1,A2,A3,B1,B2,C,best)')
+    parser.add_argument('--calibrate', action='store_true',
+                        help='only measure the features visible per pose against Table 8.4 '
+                             'and suggest feature densities')
+    parser.add_argument('--scaling', action='store_true',
+                        help='only run the scaling benchmark (worlds up to 100,000 poses '
+                             'and 10,000 features, timing B2)')
+    parser.add_argument('--scaling-algorithms', default='B2',
+                        help='algorithms timed by --scaling (default: B2)')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark and write its outputs."""
+    import json
+    from pathlib import Path
+    import sys
+
+    from landmark_db.errors import LandmarkDbError
+
+    settings = _int_list(args.settings, '--settings')
+    if any(s not in (1, 2, 3, 4) for s in settings):
+        raise LandmarkDbError(f'--settings must list numbers from 1 to 4, got {args.settings!r}')
+    if args.worlds < 1:
+        raise LandmarkDbError(f'--worlds must be >= 1, got {args.worlds}')
+    if args.small_worlds < 0:
+        raise LandmarkDbError(f'--small-worlds must be >= 0, got {args.small_worlds}')
+    if args.processes < 1:
+        raise LandmarkDbError(f'--processes must be >= 1, got {args.processes}')
+    if args.seed < 0:
+        raise LandmarkDbError(f'--seed must be >= 0, got {args.seed}')
+    from landmark_db.decomposition import ALGORITHMS
+
+    algorithms = tuple(a.strip() for a in args.algorithms.split(',') if a.strip())
+    unknown = [a for a in algorithms if a not in ALGORITHMS]
+    if unknown or not algorithms:
+        raise LandmarkDbError(f'unknown algorithm(s) {unknown}; choose from '
+                              f'{", ".join(ALGORITHMS)}')
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    if args.calibrate:
+        from landmark_db.bench.calibration import calibrate, format_calibration
+
+        rows = calibrate(settings, worlds=args.worlds, seed=args.seed,
+                         processes=args.processes)
+        text = format_calibration(rows)
+        print(text)
+        (out / 'calibration.txt').write_text(text + '\n')
+        (out / 'calibration.json').write_text(json.dumps(rows, indent=1))
+        return 0
+
+    if args.scaling:
+        from landmark_db.bench.scaling import format_scaling, run_scaling
+
+        scaling_algorithms = tuple(a.strip() for a in args.scaling_algorithms.split(',')
+                                   if a.strip())
+        bad = [a for a in scaling_algorithms if a not in ALGORITHMS]
+        if bad:
+            raise LandmarkDbError(f'unknown algorithm(s) {bad} in --scaling-algorithms')
+        rows = run_scaling(algorithms=scaling_algorithms, seed=args.seed,
+                           progress=lambda r: print(
+                               f"  {r['poses']} poses, {r['features']} features: "
+                               f"{r['algorithm']} {r['seconds']:.2f} s", file=sys.stderr))
+        text = format_scaling(rows)
+        print(text)
+        (out / 'scaling.txt').write_text(text + '\n')
+        (out / 'scaling.json').write_text(json.dumps(rows, indent=1))
+        return 0 if all(r['valid'] for r in rows) else 1
+
+    from landmark_db.bench.figures import plot_bar_chart, plot_world_decompositions
+    from landmark_db.bench.reference import (
+        THESIS_TABLE_8_2,
+        THESIS_TABLE_8_3,
+        THESIS_TABLE_8_4,
+    )
+    from landmark_db.bench.report import (
+        approximation_ratios,
+        format_report,
+        improvement_over_b2,
+        summarize,
+    )
+    from landmark_db.bench.runner import (
+        FULL,
+        REDUCED,
+        BenchConfig,
+        records_as_dicts,
+        run_benchmark,
+    )
+    from landmark_db.plotting import save_decomposition_figure
+
+    config = BenchConfig(settings=settings, worlds=args.worlds, seed=args.seed,
+                         algorithms=algorithms, reduced=args.reduced,
+                         small_worlds=args.small_worlds, processes=args.processes)
+
+    def progress(done: int, total: int, outcome: object) -> None:
+        if done == total or done % max(1, total // 20) == 0:
+            print(f'  {done}/{total} worlds', file=sys.stderr, flush=True)
+
+    records, figure_worlds = run_benchmark(config, progress=progress)
+    summary = summarize(records)
+    main_class = REDUCED if config.reduced else FULL
+    text = format_report(summary, records, list(algorithms), main_class=main_class)
+    print(text)
+    (out / 'tables.txt').write_text(text + '\n')
+    results = {
+        'config': {'settings': list(settings), 'worlds': config.worlds, 'seed': config.seed,
+                   'algorithms': list(algorithms), 'k': config.k, 'rho': config.rho,
+                   'sigma': config.sigma, 'alpha': config.alpha, 'spacing': config.spacing,
+                   'reduced': config.reduced, 'small_worlds': config.small_worlds,
+                   'small_sigma': config.small_sigma},
+        'summary': summary,
+        'improvement_over_b2_percent': improvement_over_b2(summary, world_class=main_class),
+        'approximation_ratios': approximation_ratios(records),
+        'thesis_reference': {'table_8_2': THESIS_TABLE_8_2, 'table_8_3': THESIS_TABLE_8_3,
+                             'table_8_4': THESIS_TABLE_8_4},
+        'records': records_as_dicts(records),
+    }
+    (out / 'results.json').write_text(json.dumps(results, indent=1))
+    _write_csv(out / 'results.csv', results['records'])
+    plot_bar_chart(summary, list(algorithms), out / 'fig_8_3_bars.png', world_class=main_class)
+    for setting, outcome in sorted(figure_worlds.items()):
+        plot_world_decompositions(outcome, list(algorithms),
+                                  out / f'decomposition_setting{setting}.png', config.k)
+        simulated = outcome.simulated
+        for algorithm in ('B2', 'best'):
+            d = (outcome.decompositions or {}).get(algorithm)
+            if d is not None:
+                save_decomposition_figure(
+                    out / f'decomposition_setting{setting}_{algorithm}.png', simulated.world,
+                    d.regions, config.k, d.uncovered, scene=simulated.scene,
+                    title=f'{simulated.world.name}, {algorithm}: {len(d.regions)} regions, '
+                          f'{len(d.uncovered)} uncovered k-coverable poses (x)')
+    print(f'wrote {out}/results.json, results.csv, tables.txt and figures', file=sys.stderr)
+    return 0 if all(r.valid for r in records) else 1
+
+
+def _int_list(text: str, name: str) -> tuple[int, ...]:
+    from landmark_db.errors import LandmarkDbError
+
+    try:
+        values = tuple(int(part) for part in text.split(',') if part.strip())
+    except ValueError:
+        raise LandmarkDbError(f'{name} must be comma-separated integers, got {text!r}') from None
+    if not values:
+        raise LandmarkDbError(f'{name} is empty')
+    return values
+
+
+def _write_csv(path: object, rows: list[dict[str, object]]) -> None:
+    import csv
+
+    if not rows:
+        return
+    fields = [k for k in rows[0] if k != 'problems'] + ['problems']
+    with open(path, 'w', newline='') as handle:  # type: ignore[arg-type]
+        writer = csv.DictWriter(handle, fieldnames=fields)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({**row, 'problems': ' | '.join(row.get('problems', []))})
