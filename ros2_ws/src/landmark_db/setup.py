@@ -24,6 +24,9 @@ setup(
         'console_scripts': [
             'vbn = landmark_db.cli.main:main',
         ],
-        'vbn.commands': [],
+        'vbn.commands': [
+            'decompose = landmark_db.cli.decompose:register',
+            'validate = landmark_db.cli.validate:register',
+        ],
     },
 )

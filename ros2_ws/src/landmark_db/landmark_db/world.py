@@ -383,9 +383,11 @@ def _check_poses(raw: Any) -> np.ndarray:
         if len(raw) == 0:
             return np.zeros((0, 2), dtype=float)
         try:
-            arr = np.asarray(raw, dtype=float)
+            arr = np.asarray(raw)
         except (TypeError, ValueError):
             raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers") from None
+        if arr.dtype.kind not in 'iuf':
+            raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers")
     if arr.size == 0:
         return np.zeros((0, 2), dtype=float)
     if arr.ndim != 2 or arr.shape[1] != 2 or arr.dtype == object:

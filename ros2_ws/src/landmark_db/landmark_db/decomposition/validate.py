@@ -89,7 +89,8 @@ def validate(world: WorldInstance, decomposition: Decomposition) -> list[str]:
                 if blind.size:
                     region_problems.append(
                         f'region {i}: feature {int(fid)} is not visible from pose '
-                        f'{int(blind[0])} ({blind.size} poses of {unique.size})')
+                        f'{int(blind[0])} (nor from {blind.size - 1} more of its '
+                        f'{unique.size} poses)')
                     break
         good_regions.append(unique)
     problems.extend(region_problems[:_MAX_REPORTED])
@@ -109,9 +110,9 @@ def validate(world: WorldInstance, decomposition: Decomposition) -> list[str]:
     listed[uncovered] = True
     missing = np.flatnonzero(coverable & ~covered & ~listed)
     what = 'k-coverable' if rho == 0 else f'k-coverable (after the rho = {rho} reduction)'
-    how = 'in no region' if rho == 0 else f'without its whole N_{rho} inside one region'
+    how = 'lie in no region' if rho == 0 else f'have their N_{rho} inside no single region'
     if missing.size:
-        problems.append(f'{missing.size} {what} poses are {how} and not listed as uncovered, '
+        problems.append(f'{missing.size} {what} poses {how} and are not listed as uncovered, '
                         f'e.g. pose {int(missing[0])}')
     not_coverable = np.flatnonzero(listed & ~coverable)
     if not_coverable.size:
