@@ -458,8 +458,8 @@ class _Channel:
 
 @dataclass
 class _ScanResult:
-    channels: dict[int, _Channel] = field(default_factory=dict)
-    counts: dict[int, int] = field(default_factory=dict)
+    channels: dict[str, _Channel] = field(default_factory=dict)  # by topic
+    counts: dict[str, int] = field(default_factory=dict)  # by topic
     start_ns: int | None = None
     end_ns: int | None = None
     chunk_compression: set[str] = field(default_factory=set)
@@ -689,7 +689,8 @@ class BagReader:
 
             scan = _ScanResult()
             for file in self.files:
-                for chan, stamp, raw in _scan_mcap(file, scan, want=keep_after):
+                for chan, stamp, raw in _scan_mcap(file, scan, want=keep_after,
+                                                   known=self._indexed_channels(file)):
                     yield chan.topic, chan.msgtype, stamp, raw
             for problem in scan.problems:
                 self._warn(problem)
@@ -698,6 +699,24 @@ class BagReader:
         for file in self.files:
             for chan, stamp, raw in _scan_mcap(file, scan, want=keep):
                 yield chan.topic, chan.msgtype, stamp, raw
+
+    def _indexed_channels(self, file: Path) -> dict[int, _Channel]:
+        """Return the channels that rosbags read from the summary of ``file``."""
+        if self._reader is None:
+            return {}
+        storage = self._reader.storage
+        storages = getattr(storage, 'storages', None) or [storage]
+        for mcap in storages:
+            if Path(getattr(mcap, 'path', '')).name != file.name:
+                continue
+            by_id = {c.id: c for c in getattr(mcap, 'connections', [])}
+            out = {}
+            for cid, conn in by_id.items():
+                qos = conn.ext.offered_qos_profiles if isinstance(
+                    conn.ext, ConnectionExtRosbag2) else []
+                out[cid] = _Channel(conn.topic, conn.msgtype, list(qos), conn.msgdef.data)
+            return out
+        return {}
 
     def deserialize(self, rawdata: bytes | memoryview, msgtype: str) -> Any:
         """Deserialize a message of this bag; types unknown to Jazzy use the bag's definition.
@@ -775,13 +794,10 @@ def _describe_compression(chunks: set[str], fmt: str, mode: str = '') -> str:
 
 
 def _topics_from_channels(
-    channels: dict[int, _Channel], counts: dict[int, int],
+    channels: dict[str, _Channel], counts: dict[str, int],
 ) -> dict[str, TopicInfo]:
-    topics: dict[str, TopicInfo] = {}
-    for cid, chan in channels.items():
-        old = topics.get(chan.topic)
-        count = counts.get(cid, 0) + (old.count if old else 0)
-        topics[chan.topic] = TopicInfo(chan.topic, chan.msgtype, count, chan.qos, chan.msgdef)
+    topics = {topic: TopicInfo(topic, chan.msgtype, counts.get(topic, 0), chan.qos, chan.msgdef)
+              for topic, chan in channels.items()}
     return dict(sorted(topics.items()))
 
 
@@ -835,15 +851,23 @@ def _scan_mcap(
     file: Path,
     scan: _ScanResult,
     want: Any,
+    known: dict[int, _Channel] | None = None,
 ) -> Iterator[tuple[_Channel, int, bytes]]:
     """Read an MCAP file record by record, keeping what is intact.
 
     Fills ``scan`` with schemas, channels, counts and times; yields the messages
-    ``want(topic, msgtype, stamp)`` accepts (none when ``want`` is None). A
-    corrupted chunk is skipped and noted in ``scan.problems``; the scan ends at
-    the first unreadable record outside a chunk (a truncated file).
+    ``want(topic, msgtype, stamp)`` accepts (none when ``want`` is None).
+    ``known`` gives the channels of an indexed file, which make messages readable
+    even when the chunk holding the channel records is lost. A corrupted chunk
+    is skipped and noted in ``scan.problems``; the scan ends at the first
+    unreadable record outside a chunk, or inside the last one of a truncated
+    file (keeping that chunk's complete records).
     """
     schemas: dict[int, tuple[str, str]] = {}
+    channels: dict[int, _Channel] = dict(known or {})
+    for chan in channels.values():
+        scan.channels.setdefault(chan.topic, chan)
+        scan.counts.setdefault(chan.topic, 0)
     bad_chunks = 0
 
     def handle(
@@ -872,15 +896,16 @@ def _scan_mcap(
                     except Exception:  # noqa: BLE001 - QoS is optional information
                         qos = []
             name, msgdef = schemas.get(sid, ('', ''))
-            if cid not in scan.channels:
-                scan.channels[cid] = _Channel(topic, name, qos, msgdef)
-                scan.counts.setdefault(cid, 0)
+            if cid not in channels:
+                channels[cid] = _Channel(topic, name, qos, msgdef)
+                scan.channels.setdefault(topic, channels[cid])
+                scan.counts.setdefault(topic, 0)
         elif op == _OP_MESSAGE:
             cid, _seq, log_time, _pub = struct.unpack_from('<HIQQ', body, 0)
-            chan = scan.channels.get(cid)
+            chan = channels.get(cid)
             if chan is None:
                 return
-            scan.counts[cid] = scan.counts.get(cid, 0) + 1
+            scan.counts[chan.topic] += 1
             scan.start_ns = log_time if scan.start_ns is None else min(scan.start_ns, log_time)
             scan.end_ns = log_time if scan.end_ns is None else max(scan.end_ns, log_time)
             if want is not None and want(chan.topic, chan.msgtype, log_time):

@@ -1,0 +1,61 @@
+"""An rclpy node for a command-line tool, with the tool in charge of signals.
+
+rclpy's own SIGINT handler shuts the context down under the tool's feet; the bag
+tools need to finish their work first (``record`` closes its bag, ``play`` waits
+for acknowledgements), so they initialize rclpy without signal handlers and
+handle SIGINT and SIGTERM themselves.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+import os
+import signal
+from typing import Any
+
+__all__ = ['on_stop_signals', 'ros_node']
+
+
+@contextmanager
+def ros_node(name: str) -> Iterator[tuple[Any, Any]]:
+    """Yield ``(node, executor)`` in a fresh rclpy context; clean up on exit.
+
+    The node name gets the process id appended so that two tools never share a name.
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    executor = None
+    try:
+        node = rclpy.create_node(f'{name}_{os.getpid()}', context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        yield node, executor
+    finally:
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
+        if node is not None:
+            node.destroy_node()
+        context.try_shutdown()
+
+
+@contextmanager
+def on_stop_signals(handler: Callable[[int], None]) -> Iterator[None]:
+    """Call ``handler(signum)`` on SIGINT and SIGTERM inside the block; restore after."""
+    previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    for sig in previous:
+        signal.signal(sig, lambda signum, _frame: handler(signum))
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def raise_keyboard_interrupt(_signum: int) -> None:
+    """Interrupt the main thread like Ctrl-C (a stop-signal handler)."""
+    raise KeyboardInterrupt
