@@ -26,6 +26,10 @@ setup(
         ],
         'vbn.commands': [
             'doctor = visibility_builder.cli.doctor:register',
+            'bag-info = visibility_builder.cli.bag_info:register',
+            'echo = visibility_builder.cli.echo:register',
+            'play = visibility_builder.cli.play:register',
+            'record = visibility_builder.cli.record:register',
         ],
     },
 )
