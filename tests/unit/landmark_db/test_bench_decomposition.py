@@ -35,7 +35,8 @@ def test_bench_end_to_end_writes_tables_results_and_figures(tmp_path: Path,
     assert f"[{THESIS_TABLE_8_3[2]['A1']:.2f}]" in out
     assert 'passed the validator' in out
     for name in ('results.json', 'results.csv', 'tables.txt', 'fig_8_3_bars.png',
-                 'decomposition_setting2.png', 'decomposition_setting2_B2.png'):
+                 'decomposition_setting2.png', 'decomposition_setting2_B2.png',
+                 'decomposition_k_rho_sweep.png'):
         path = tmp_path / name
         assert path.exists() and path.stat().st_size > 0, name
     assert (tmp_path / 'fig_8_3_bars.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'

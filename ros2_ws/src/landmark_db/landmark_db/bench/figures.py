@@ -9,7 +9,7 @@ import numpy as np
 from landmark_db.bench.reference import THESIS_TABLE_8_2, THESIS_TABLE_8_3
 from landmark_db.bench.runner import FULL, WorldOutcome
 
-__all__ = ['plot_bar_chart', 'plot_world_decompositions']
+__all__ = ['plot_bar_chart', 'plot_k_rho_sweep', 'plot_world_decompositions']
 
 
 def plot_bar_chart(summary: dict[str, Any], algorithms: list[str], path: str | Path,
@@ -105,3 +105,47 @@ def plot_world_decompositions(outcome: WorldOutcome, algorithms: list[str], path
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def plot_k_rho_sweep(simulated: Any, path: str | Path, algorithm: str = 'B2',
+                     ks: tuple[int, ...] = (4, 6, 8, 10), rhos: tuple[int, ...] = (0, 1),
+                     sigma: int = 3, seed: int = 0) -> tuple[Path, list[dict[str, Any]]]:
+    """Decompose one world for several k and rho, like Figures 8.8 to 8.15.
+
+    The thesis shows B.2 on its 6 m x 3 m real world for k = 4, 6, 8, 10 and
+    rho = 0, 1 with sigma = 3; this draws the same sweep on a simulated world, one
+    panel per (k, rho), every decomposition checked by the validator.
+
+    Returns:
+        The path written and one row per panel (k, rho, regions, uncovered, problems).
+    """
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from landmark_db.decomposition import decompose, validate
+    from landmark_db.plotting import draw_decomposition
+
+    world = simulated.world
+    fig, axes = plt.subplots(len(rhos), len(ks), figsize=(4.2 * len(ks), 4.2 * len(rhos)),
+                             squeeze=False)
+    rows = []
+    for i, rho in enumerate(rhos):
+        for j, k in enumerate(ks):
+            d = decompose(world, algorithm, k, rho=rho, sigma=sigma, rng=seed)
+            problems = validate(world, d)
+            rows.append({'k': k, 'rho': rho, 'regions': len(d.regions),
+                         'uncovered': int(len(d.uncovered)), 'problems': list(problems)})
+            mark = '' if not problems else ' INVALID'
+            draw_decomposition(axes[i, j], world, d.regions, k, d.uncovered,
+                               scene=simulated.scene,
+                               title=f'{algorithm}, k={k}, rho={rho}, sigma={sigma}: '
+                                     f'{len(d.regions)} regions{mark}')
+    fig.suptitle(f'{world.name}: {world.n_poses} poses, {world.n_features} features '
+                 '(compare thesis Figures 8.8-8.15)', fontsize=11)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path, rows

@@ -110,7 +110,11 @@ def run(args: argparse.Namespace) -> int:
         (out / 'scaling.json').write_text(json.dumps(rows, indent=1))
         return 0 if all(r['valid'] for r in rows) else 1
 
-    from landmark_db.bench.figures import plot_bar_chart, plot_world_decompositions
+    from landmark_db.bench.figures import (
+        plot_bar_chart,
+        plot_k_rho_sweep,
+        plot_world_decompositions,
+    )
     from landmark_db.bench.reference import (
         THESIS_TABLE_8_2,
         THESIS_TABLE_8_3,
@@ -173,8 +177,18 @@ def run(args: argparse.Namespace) -> int:
                     d.regions, config.k, d.uncovered, scene=simulated.scene,
                     title=f'{simulated.world.name}, {algorithm}: {len(d.regions)} regions, '
                           f'{len(d.uncovered)} uncovered k-coverable poses (x)')
+    from landmark_db.simulator.settings import get_setting, small_setting
+    from landmark_db.simulator.simulate import simulate_world
+
+    sweep_world = simulate_world(small_setting(get_setting(settings[0])), config.seed)
+    _, sweep = plot_k_rho_sweep(sweep_world, out / 'decomposition_k_rho_sweep.png',
+                                seed=config.seed)
+    sweep_problems = [row for row in sweep if row['problems']]
+    for row in sweep_problems:
+        print(f"!!! k/rho sweep k={row['k']} rho={row['rho']} INVALID: "
+              f"{'; '.join(row['problems'][:2])}", file=sys.stderr)
     print(f'wrote {out}/results.json, results.csv, tables.txt and figures', file=sys.stderr)
-    return 0 if all(r.valid for r in records) else 1
+    return 0 if all(r.valid for r in records) and not sweep_problems else 1
 
 
 def _int_list(text: str, name: str) -> tuple[int, ...]:
