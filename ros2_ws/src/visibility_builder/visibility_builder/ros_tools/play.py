@@ -194,25 +194,29 @@ class Player:
                 topics=list(self.publishers), start_ns=start):
             yield topic, stamp, raw
 
+    def _put(self, out: queue.Queue, item: object) -> bool:
+        """Queue ``item`` unless asked to stop; return False when stopping."""
+        while not self._stop.is_set():
+            try:
+                out.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def _prefetch(self, out: queue.Queue) -> None:
         try:
-            while not self._stop.is_set():
+            while True:
                 for item in self._messages():
-                    while not self._stop.is_set():
-                        try:
-                            out.put(item, timeout=0.1)
-                            break
-                        except queue.Full:
-                            continue
-                    if self._stop.is_set():
+                    if not self._put(out, item):
                         return
-                out.put(None)  # end of one pass
-                if not self.options.loop:
+                if not self._put(out, None):  # end of one pass
                     return
+                if not self.options.loop:
+                    break
         except Exception as error:  # noqa: BLE001 - reported in the main thread
-            out.put(error)
-        finally:
-            out.put(_END)
+            self._put(out, error)
+        self._put(out, _END)
 
     def play(self) -> PlayStats:
         """Publish the bag (every pass when looping); return the statistics."""

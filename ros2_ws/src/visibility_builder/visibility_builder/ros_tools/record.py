@@ -120,6 +120,8 @@ class Recorder:
         def on_message(raw: bytes, topic: str = topic, connection: Any = connection) -> None:
             self.writer.write_raw(connection, time.time_ns(), raw)
             self.counts[topic] += 1
+            if self.counts[topic] == 1:
+                self.announce(f'first message on {topic}')
 
         self.subscriptions[topic] = self.node.create_subscription(
             cls, topic, on_message, subscription_qos_for(offered), raw=True)
