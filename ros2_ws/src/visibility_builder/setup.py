@@ -9,6 +9,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
+    package_data={'visibility_builder.scenes': ['*.json']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -30,6 +31,7 @@ setup(
             'echo = visibility_builder.cli.echo:register',
             'play = visibility_builder.cli.play:register',
             'record = visibility_builder.cli.record:register',
+            'render = visibility_builder.cli.render:register',
         ],
     },
 )

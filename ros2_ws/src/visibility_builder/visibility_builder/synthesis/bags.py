@@ -249,7 +249,7 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
         duration = math.floor(trajectory.duration / 0.02 + 1e-9) * 0.02
     elif frames:
         duration = (frames[-1][0] - START_NS) / 1e9
-    _LOG.info('wrote %s: %d images, %.1f s', out, images, duration)
+    _LOG.debug('wrote %s: %d images, %.1f s', out, images, duration)
     return BagSummary(out, dict(sorted(bag.counts.items())), duration, images)
 
 
