@@ -94,6 +94,21 @@ def test_texture_reads_left_to_right_from_the_free_side(pano):
     assert np.all(np.diff(arc) > 0)
 
 
+@settings(max_examples=50, deadline=None)
+@given(x=st.floats(0.01, 3.99), y=st.floats(0.01, 3.99), angle=st.floats(-math.pi, math.pi))
+def test_cast_rays_in_an_empty_box_matches_the_slab_formula(x, y, angle):
+    box = Scene(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]))
+    starts, ends, _ = box.wall_segments()
+    rho, seg, s = cast_rays(np.array([x, y]), np.array([angle]), starts, ends)
+    d = np.array([math.cos(angle), math.sin(angle)])
+    with np.errstate(divide='ignore'):
+        exits = [(4.0 - c) / dc if dc > 0 else -c / dc for c, dc in zip((x, y), d)
+                 if abs(dc) > 1e-12]
+    assert rho[0] == pytest.approx(min(exits), rel=1e-9, abs=1e-9)
+    hit = starts[seg[0]] + s[0] * (ends[seg[0]] - starts[seg[0]])
+    assert hit == pytest.approx(np.array([x, y]) + rho[0] * d, abs=1e-9)
+
+
 free = st.tuples(st.floats(0.2, 3.8), st.floats(0.2, 3.8), st.floats(-math.pi, math.pi))
 
 

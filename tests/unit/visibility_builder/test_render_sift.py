@@ -89,3 +89,17 @@ def test_mono_and_colour_renders_agree(room_renderer):
     assert mono.shape == colour.shape[:2]
     expected = cv2.cvtColor(colour, cv2.COLOR_BGR2GRAY).astype(int)
     assert np.mean(np.abs(mono.astype(int) - expected)) < 2.0
+
+
+def test_repeated_textures_make_ambiguous_features(room_renderer):
+    # Tiled brick repeats the same patch along walls: some keypoints have a
+    # near-identical descriptor at another wall point, which a ratio test must reject.
+    out, keypoints, descriptors = _features(room_renderer, (1.0, 1.5, 0.0))
+    points = _true_points(out, keypoints)
+    ambiguous = 0
+    for i, matches in enumerate(cv2.BFMatcher().knnMatch(descriptors, descriptors, k=3)):
+        others = [m for m in matches if m.trainIdx != i]
+        if others and others[0].distance < 150 and np.linalg.norm(
+                points[i] - points[others[0].trainIdx]) > 0.3:
+            ambiguous += 1
+    assert ambiguous >= 20

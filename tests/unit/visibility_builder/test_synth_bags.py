@@ -172,3 +172,20 @@ def test_bad_input_is_one_line_errors(tmp_path, room, capsys):
         assert err.startswith('vbn render: error:') and '\n' not in err
     assert not (tmp_path / 'o').exists()
     assert not (tmp_path / 'x').exists()
+
+
+def test_vbn_render_writes_a_bag_and_a_snapshot(tmp_path, capsys):
+    out = tmp_path / 'cli_bag'
+    argv = ['render', '--scene', 'room', '--kind', 'run', '--width', '64', '--height', '16',
+            '--duration', '1', '--compressed', 'png', '--out', str(out)]
+    assert vbn_main(argv) == 0
+    assert 'wrote' in capsys.readouterr().out
+    bag = _read(out)
+    assert len(bag['/camera/image_raw/compressed']) == 11
+    assert bag['/camera/image_raw/compressed'][0][1].format == 'bgr8; png compressed bgr8'
+    png = tmp_path / 'view.png'
+    assert vbn_main(['render', '--scene', 'room', '--camera', 'pinhole', '--width', '80',
+                     '--height', '60', '--snapshot', '1', '1', '45', '--out', str(png)]) == 0
+    assert cv2.imread(str(png)).shape == (60, 80, 3)
+    assert vbn_main(['render', '--scene', 'room', '--snapshot', '1.3', '2.3', '0',
+                     '--out', str(tmp_path / 'inside_table.png')]) == 2
