@@ -272,6 +272,8 @@ def run_trajectory(scene: Scene, params: RunParameters | None = None,
     nodes, clearance, graph = _lattice_graph(scene, params)
     waypoints = _waypoints(scene, nodes, clearance, params)
     polyline = _plan(nodes, graph, waypoints)
+    if np.sum(np.linalg.norm(np.diff(polyline, axis=0), axis=1)) < 2 * params.lattice:
+        raise VisibilityBuilderError('the scene is too small for a run')
     step = params.lattice / 2
     path = _smooth(scene, _resample(polyline, step), params, step)
     trajectory = _time_path(path, params)
@@ -293,6 +295,8 @@ def kidnapped_trajectory(run: Trajectory) -> Trajectory:
     same length and time step as ``run``.
     """
     n = len(run.times)
+    if n < 4:
+        raise VisibilityBuilderError('a run of fewer than 4 samples cannot be kidnapped')
     half = n // 2
     distance = np.linalg.norm(run.poses[:half, :2] - run.poses[half, :2], axis=1)
     target = int(np.argmax(distance))
