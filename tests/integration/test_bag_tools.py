@@ -255,3 +255,30 @@ def test_bad_options(tmp_path: Path, start_process) -> None:
     code, output = run_vbn(start_process, 'record', '--topics', '/x', '--out',
                            str(tmp_path / 'bag'))
     assert_one_line_error(code, output, 'record', 'exists already')
+
+
+# -- play options, in process ----------------------------------------------------------
+def test_player_start_offset_topics_and_rate(tmp_path: Path, ros_node) -> None:
+    from visibility_builder.ros_tools.play import Player, PlayOptions
+    write_synthetic_bag(tmp_path / 'bag', n=30, with_tf=True)  # 1 s at 30 Hz
+    with open_bag(tmp_path / 'bag') as reader:
+        player = Player(ros_node.node, reader, PlayOptions(
+            rate=5.0, start_offset_s=0.5, topics=('/odom', '/tf')))
+        assert list(player.publishers) == ['/odom']
+        assert player.stats.skipped_topics == ['/tf']
+        stats = player.play()
+    # /odom messages at i/30 s + 2 ns: those at or after 0.5 s are i = 15..29.
+    assert stats.published == 15
+    assert stats.clock_published == 0
+
+
+def test_play_publishes_clock_at_bag_time(tmp_path: Path, start_process) -> None:
+    write_synthetic_bag(tmp_path / 'bag', n=30, with_tf=False)
+    echo = start_process([VBN, 'echo', '/clock', '--once', '--timeout', str(2 * WAIT)],
+                         name='echo')
+    start_process([VBN, 'play', str(tmp_path / 'bag'), '--loop', '--clock', '100',
+                   '--topics', '/ground_truth/pose'], name='play')
+    assert echo.wait(timeout=2 * WAIT) == 0, echo.output
+    clock = yaml.safe_load(echo.output.split('---\n')[0])['clock']
+    stamp = clock['sec'] + clock['nanosec'] * 1e-9
+    assert 1_763_769_600 <= stamp <= 1_763_769_601  # inside the bag's 1 s, not wall time
