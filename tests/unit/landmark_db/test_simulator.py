@@ -203,7 +203,8 @@ def test_world_feature_ids_are_scene_rows() -> None:
     simulated = simulate_world(small_setting(get_setting(1)), 3)
     world = simulated.world
     np.testing.assert_array_equal(world.feature_ids, np.arange(len(simulated.scene.features)))
-    np.testing.assert_array_equal(world.visible.toarray(), simulated.visible)
+    np.testing.assert_array_equal(world.visible.toarray(),
+                                  compute_visibility(simulated.scene, world.poses))
     assert world.spacing == 0.5
 
 

@@ -33,9 +33,7 @@ def scaling_world(n_poses: int, n_features: int, seed: int = 0, spacing: float =
     from landmark_db.simulator.grid import pose_grid
     from landmark_db.simulator.scene_sampler import place_features, random_scene
     from landmark_db.simulator.settings import Mixture, get_setting
-    from landmark_db.simulator.simulate import SimulatedWorld
-    from landmark_db.simulator.visibility import compute_visibility
-    from landmark_db.world import WorldInstance
+    from landmark_db.simulator.simulate import SimulatedWorld, world_from_scene
 
     base = get_setting(2)
     free_fraction = 0.93  # share of the square left after obstacles and wall margins
@@ -55,10 +53,7 @@ def scaling_world(n_poses: int, n_features: int, seed: int = 0, spacing: float =
     name = f'scaling-{n_poses}-{n_features}'
     scene = Scene(bare.perimeter, bare.obstacles, features, name=name)
     poses, edges = pose_grid(scene, spacing)
-    visible = compute_visibility(scene, poses)
-    world = WorldInstance.from_visibility(poses, edges, visible, np.arange(len(features)),
-                                          spacing=spacing, name=name)
-    return SimulatedWorld(scene, world, visible)
+    return SimulatedWorld(scene, world_from_scene(scene, poses, edges, spacing, name))
 
 
 def run_scaling(sizes: tuple[tuple[int, int], ...] = DEFAULT_SIZES,

@@ -2,7 +2,7 @@
 
 This composes the simulator's steps (Section 8.1): :func:`random_scene` draws the
 polygon world, :func:`pose_grid` samples its free space every ``spacing`` metres,
-and :func:`compute_visibility` gives each pose's visibility set. Feature ids are the
+and :func:`visible_pairs` gives each pose's visibility set. Feature ids are the
 row indices of ``scene.features``, so the renderer and the world instance agree.
 """
 from __future__ import annotations
@@ -10,15 +10,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from landmark_db.scene import Scene
 from landmark_db.simulator.grid import pose_grid
 from landmark_db.simulator.scene_sampler import random_scene
 from landmark_db.simulator.settings import WorldSetting, get_setting
-from landmark_db.simulator.visibility import compute_visibility
+from landmark_db.simulator.visibility import visible_pairs
 from landmark_db.world import WorldInstance
 
-__all__ = ['SimulatedWorld', 'simulate_world', 'world_rng']
+__all__ = ['SimulatedWorld', 'simulate_world', 'world_from_scene', 'world_rng']
 
 
 @dataclass(frozen=True)
@@ -29,17 +30,16 @@ class SimulatedWorld:
         scene: perimeter, obstacles and features.
         world: poses, grid edges and visibility; feature id ``j`` is
             ``scene.features`` row ``j``.
-        visible: ``(n_poses, n_features) bool`` visibility, as computed.
     """
 
     scene: Scene
     world: WorldInstance
-    visible: np.ndarray
 
     @property
     def mean_visible(self) -> float:
         """Mean number of features visible per pose (Table 8.4's statistic)."""
-        return float(self.visible.sum(axis=1).mean()) if self.visible.size else 0.0
+        counts = self.world.visible_counts
+        return float(np.mean(counts)) if counts.size else 0.0
 
 
 def world_rng(setting: int, seed: int) -> np.random.Generator:
@@ -70,8 +70,19 @@ def simulate_world(setting: int | WorldSetting, seed: int, spacing: float = 0.5,
     rng = world_rng(config.number, seed)
     scene = random_scene(config, rng, name=name)
     poses, edges = pose_grid(scene, spacing)
-    visible = compute_visibility(scene, poses)
-    world = WorldInstance.from_visibility(poses, edges, visible,
-                                          np.arange(len(scene.features)), spacing=spacing,
-                                          name=name)
-    return SimulatedWorld(scene, world, visible)
+    return SimulatedWorld(scene, world_from_scene(scene, poses, edges, spacing, name))
+
+
+def world_from_scene(scene: Scene, poses: np.ndarray, edges: np.ndarray, spacing: float,
+                     name: str) -> WorldInstance:
+    """Compute the visibility of ``scene``'s features from ``poses`` as a world instance.
+
+    Feature id ``j`` is ``scene.features`` row ``j``; the visibility is assembled
+    sparse, so worlds of 100,000 poses and 10,000 features fit in memory.
+    """
+    rows, cols = visible_pairs(scene, poses)
+    f = len(scene.features)
+    visible = sp.csr_matrix((np.ones(rows.size, dtype=bool), (rows, cols)),
+                            shape=(poses.shape[0], f))
+    return WorldInstance.from_visibility(poses, edges, visible, np.arange(f), spacing=spacing,
+                                         name=name)

@@ -24,7 +24,7 @@ import numpy as np
 
 from landmark_db.scene import Scene
 
-__all__ = ['compute_visibility', 'feature_walls', 'segments_blocked']
+__all__ = ['compute_visibility', 'feature_walls', 'segments_blocked', 'visible_pairs']
 
 _POSE_CHUNK_CELLS = 4_000_000  # poses x features per chunk of the cone/range pass
 _PAIR_CHUNK_CELLS = 8_000_000  # pairs x walls per chunk of the occlusion pass
@@ -32,7 +32,29 @@ _T_EPS = 1e-9
 
 
 def compute_visibility(scene: Scene, poses: np.ndarray, tile: float = 8.0) -> np.ndarray:
-    """Tell which scene features are visible from which poses.
+    """Tell which scene features are visible from which poses, as a dense matrix.
+
+    See :func:`visible_pairs` for the method.
+
+    Args:
+        scene: the polygon world with its features.
+        poses: ``(n, 2)`` pose coordinates, metres (assumed in free space).
+        tile: tile side, metres.
+
+    Returns:
+        ``visible  # (n_poses, n_features) bool``, column ``j`` for
+        ``scene.features`` row ``j``.
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 2)
+    visible = np.zeros((poses.shape[0], len(scene.features)), dtype=bool)
+    rows, cols = visible_pairs(scene, poses, tile)
+    visible[rows, cols] = True
+    return visible
+
+
+def visible_pairs(scene: Scene, poses: np.ndarray,
+                  tile: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    """List the (pose, feature) pairs where the feature is visible from the pose.
 
     Poses are processed in square tiles of ``tile`` metres; for each tile only the
     features within range of its bounding box, and only the walls whose bounding box
@@ -46,15 +68,16 @@ def compute_visibility(scene: Scene, poses: np.ndarray, tile: float = 8.0) -> np
         tile: tile side, metres.
 
     Returns:
-        ``visible  # (n_poses, n_features) bool``, column ``j`` for
-        ``scene.features`` row ``j``.
+        ``(rows, cols)``: int64 pose indices and feature rows of ``scene.features``,
+        sorted by pose then feature.
     """
     poses = np.asarray(poses, dtype=float).reshape(-1, 2)
     features = scene.features
     n, f = poses.shape[0], len(features)
-    visible = np.zeros((n, f), dtype=bool)
     if n == 0 or f == 0:
-        return visible
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    out_rows: list[np.ndarray] = []
+    out_cols: list[np.ndarray] = []
     starts, ends, _ = scene.wall_segments()
     wall_lo = np.minimum(starts, ends)
     wall_hi = np.maximum(starts, ends)
@@ -94,8 +117,14 @@ def compute_visibility(scene: Scene, poses: np.ndarray, tile: float = 8.0) -> np
             cols = near[cols]
             blocked = segments_blocked(chunk[rows], position[cols], starts[walls], ends[walls],
                                        skip_wall=wall_map[own_wall[cols]])
-            visible[rows_global[rows[~blocked]], cols[~blocked]] = True
-    return visible
+            out_rows.append(rows_global[rows[~blocked]])
+            out_cols.append(cols[~blocked])
+    if not out_rows:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    rows_all = np.concatenate(out_rows).astype(np.int64)
+    cols_all = np.concatenate(out_cols).astype(np.int64)
+    order = np.lexsort((cols_all, rows_all))
+    return rows_all[order], cols_all[order]
 
 
 def feature_walls(scene: Scene) -> np.ndarray:
