@@ -27,6 +27,8 @@ setup(
         'vbn.commands': [
             'decompose = landmark_db.cli.decompose:register',
             'validate = landmark_db.cli.validate:register',
+            'simulate = landmark_db.cli.simulate:register',
+            'bench-decomposition = landmark_db.cli.bench_decomposition:register',
         ],
     },
 )
