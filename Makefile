@@ -12,7 +12,7 @@ PACKAGING := $(shell find ros2_ws/src -maxdepth 3 \( -name setup.py -o -name set
 	-o -name package.xml -o -path '*/config/*' -o -path '*/resource/*' \) -type f)
 PKGS := landmark_db visibility_builder landmark_localizer
 
-.PHONY: setup test lint demo clean
+.PHONY: setup test lint demo clean sample-bags cache-bags
 
 setup: $(BUILD_STAMP) env.sh
 
@@ -48,6 +48,27 @@ test: setup
 
 demo: setup
 	source env.sh && vbn doctor
+
+# The committed samples in bags/ (34 MB). Regenerate only when their content must change:
+# rendering is deterministic, so an unchanged renderer reproduces them byte for byte.
+SAMPLE_BAGS := \
+  'room_exploration|--scene room --kind exploration --camera panoramic --spacing 0.25 --compressed --jpeg-quality 85' \
+  'room_run|--scene room --kind run --camera panoramic --speed 0.5 --seed 1 --exposure 0.08 --compressed --jpeg-quality 80' \
+  'room_run_kidnapped|--scene room --kind run-kidnapped --camera panoramic --speed 0.5 --seed 2 --exposure 0.08 --compressed --jpeg-quality 80' \
+  'floor_exploration|--scene floor --kind exploration --camera panoramic --spacing 1.25 --compressed --jpeg-quality 85'
+# Larger bags, generated on demand into the ignored cache/ folder.
+CACHE_BAGS := \
+  'room_exploration_pinhole|--scene room --kind exploration --camera pinhole --spacing 0.25 --compressed' \
+  'floor_exploration|--scene floor --kind exploration --camera panoramic --spacing 0.25 --compressed' \
+  'floor_run|--scene floor --kind run --camera panoramic --compressed'
+
+sample-bags: setup
+	source env.sh && for spec in $(SAMPLE_BAGS); do name=$${spec%%|*}; \
+	  rm -rf bags/$$name && vbn render $${spec#*|} --out bags/$$name; done
+
+cache-bags: setup
+	source env.sh && mkdir -p cache && for spec in $(CACHE_BAGS); do name=$${spec%%|*}; \
+	  test -d cache/$$name || vbn render $${spec#*|} --out cache/$$name; done
 
 clean:
 	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log env.sh
