@@ -41,6 +41,9 @@ def summarize(records: list[RunRecord]) -> dict[str, Any]:
             'uncovered': _mean([r.uncovered for r in ok]),
             'seconds': _mean([r.seconds for r in group if not _crashed(r)]),
             'seconds_max': max((r.seconds for r in group if not _crashed(r)), default=0.0),
+            'cpu_seconds': _mean([r.cpu_seconds for r in group if not _crashed(r)]),
+            'cpu_seconds_max': max((r.cpu_seconds for r in group if not _crashed(r)),
+                                   default=0.0),
         })
     worlds: dict[tuple[str, int], dict[int, RunRecord]] = defaultdict(dict)
     for record in records:
@@ -130,7 +133,9 @@ def format_report(summary: dict[str, Any], records: list[RunRecord], algorithms:
              THESIS_TABLE_8_3),
             ('Figure 8.3 (right): average number of used features', 'used_features', None),
             ('Average number of uncovered k-coverable poses', 'uncovered', None),
-            ('Mean time per world (s, one core)', 'seconds', None)):
+            ('Mean wall-clock time per world (s, one process)', 'seconds', None),
+            ('Mean CPU time per world (s)', 'cpu_seconds', None),
+            ('Largest CPU time on one world (s)', 'cpu_seconds_max', None)):
         lines.append(title)
         lines.append(_row(['Setting', *algorithms], first=8))
         for s in settings:
@@ -205,7 +210,7 @@ def _std(values: list[float]) -> float:
 
 
 def _fmt(value: float, key: str) -> str:
-    return f'{value:.3f}' if key == 'seconds' else f'{value:.2f}'
+    return f'{value:.3f}' if 'seconds' in key else f'{value:.2f}'
 
 
 def _row(cells: list[str], first: int = 8, width: int = 17) -> str:
