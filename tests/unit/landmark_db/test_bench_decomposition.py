@@ -114,3 +114,14 @@ def test_reference_tables_are_complete() -> None:
     assert THESIS_TABLE_8_2[1]['B2'] == 112.63
     assert THESIS_TABLE_8_3[4]['C'] == 218.56
     assert np.allclose([THESIS_TABLE_8_4[s] for s in (1, 2, 3, 4)], [30, 95, 41, 117])
+
+
+def test_scaling_world_meets_its_targets() -> None:
+    from landmark_db.bench.scaling import format_scaling, run_scaling, scaling_world
+
+    simulated = scaling_world(2_000, 600, seed=1)
+    assert simulated.world.n_features == 600
+    assert 1_600 < simulated.world.n_poses < 2_400
+    rows = run_scaling(((1_000, 300),), algorithms=('B2',))
+    assert rows[0]['valid'] and rows[0]['regions'] > 0
+    assert 'B2' in format_scaling(rows)
