@@ -127,3 +127,39 @@ def test_jitter_summary() -> None:
     assert summary['jitter_p50_ms'] == pytest.approx(2.0)
     assert summary['lateness_max_ms'] == pytest.approx(2.0)
     assert PlayStats().jitter_summary() == {}
+
+
+class FakeTime:
+    """A clock whose sleeps wake up ``late`` seconds after they should."""
+
+    def __init__(self, late: float) -> None:
+        self.now = 0.0
+        self.late = late
+        self.spins = 0
+
+    def clock(self) -> float:
+        self.spins += 1
+        self.now += 1e-6  # every clock read costs a microsecond of spinning
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.now += seconds + self.late
+
+
+def test_deadline_sleeper_adapts_its_margin_to_late_wakeups() -> None:
+    from visibility_builder.ros_tools.play import DeadlineSleeper
+    fake = FakeTime(late=0.002)
+    sleeper = DeadlineSleeper(clock=fake.clock, sleep=fake.sleep)
+    lateness = []
+    for i in range(1, 40):
+        deadline = i / 30
+        sleeper.sleep_until(deadline)
+        lateness.append(fake.now - deadline)
+    assert min(lateness) >= 0.0
+    assert sleeper.margin == pytest.approx(0.003, rel=0.01)  # 1.5 x the 2 ms wake-up delay
+    assert max(lateness[5:]) < 1e-5  # once adapted, on time to the microsecond
+    fake = FakeTime(late=0.0001)  # an idle machine: the margin decays to its minimum
+    sleeper = DeadlineSleeper(clock=fake.clock, sleep=fake.sleep)
+    for i in range(1, 200):
+        sleeper.sleep_until(i / 30)
+    assert sleeper.margin == pytest.approx(0.0005)

@@ -30,6 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='start only when every topic has a matched subscriber')
     parser.add_argument('--wait-timeout', type=float, default=None, metavar='S',
                         help='with --wait-for-subscribers: give up after S seconds')
+    parser.add_argument('--realtime', action='store_true',
+                        help='run with real-time (SCHED_FIFO) priority if permitted (root or '
+                             'CAP_SYS_NICE): keeps the timing exact on a busy machine')
     parser.add_argument('--stats', action='store_true',
                         help='print the achieved timing (inter-message jitter) at the end')
     parser.set_defaults(func=run)
@@ -46,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
         ros_node,
     )
 
+    if args.realtime:
+        _set_realtime_priority()
     options = PlayOptions(
         rate=args.rate, loop=args.loop, clock_hz=args.clock,
         topics=tuple(args.topics) if args.topics else None,
@@ -73,3 +78,16 @@ def run(args: argparse.Namespace) -> int:
             summary = stats.jitter_summary()
             print('timing: ' + ', '.join(f'{k}={v:.3f}' for k, v in summary.items()), flush=True)
     return 0
+
+
+def _set_realtime_priority(priority: int = 10) -> None:
+    """Switch this process to SCHED_FIFO, or warn that it is not permitted."""
+    import logging
+    import os
+
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (AttributeError, OSError) as error:
+        logging.getLogger(__name__).warning(
+            'cannot switch to real-time priority (%s); playing with normal priority',
+            getattr(error, 'strerror', None) or error)

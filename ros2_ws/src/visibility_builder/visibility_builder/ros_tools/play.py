@@ -8,18 +8,20 @@ message type has no Python package here (``/tf``: no ``tf2_msgs`` in the
 pip-installed ROS 2) is skipped with one warning.
 
 Timing: message ``i`` is due at ``wall_start + (t_i - t_start) / rate``. The
-player sleeps until about 1.5 ms before the deadline and spin-waits the rest on
-``time.perf_counter`` (OS sleeps overshoot by up to a millisecond or more), while a
-reader thread decompresses the bag ahead into a bounded queue. The achieved
-timing (publish-time lateness and the error of every inter-message interval) is
-returned in :class:`PlayStats`; ``vbn play --stats`` prints it.
+player sleeps until shortly before the deadline and spin-waits the rest on
+``time.perf_counter`` (:class:`DeadlineSleeper`: an OS sleep wakes up late by up to
+several milliseconds on a busy machine, so the spin margin adapts to the wake-up
+latencies observed). The bag is read ahead in the same thread, only in the slack
+before a deadline, so that decompressing a chunk never delays a publish. The
+achieved timing (publish-time lateness and the error of every inter-message
+interval) is returned in :class:`PlayStats`; ``vbn play --stats`` prints it.
 """
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections import deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 import logging
-import queue
 import threading
 import time
 from typing import Any
@@ -33,13 +35,14 @@ from visibility_builder.bag_io import BagReader
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.ros_tools.msgtypes import import_message_class, profile_from_bag_qos
 
-__all__ = ['PlayOptions', 'PlayStats', 'Player', 'sleep_until']
+__all__ = ['DeadlineSleeper', 'PlayOptions', 'PlayStats', 'Player', 'sleep_until']
 
 _LOG = logging.getLogger(__name__)
 
 _SPIN_MARGIN_S = 0.0015  # sleep until this long before a deadline, then spin-wait
-_QUEUE_MESSAGES = 256
-_END = object()
+_READ_SLACK_S = 0.010  # read ahead only while the next deadline is further away than this
+_READ_AHEAD_MESSAGES = 512
+_READ_START_S = 0.5  # read ahead this long before the first message goes out
 
 
 @dataclass(frozen=True)
@@ -101,14 +104,50 @@ class PlayStats:
         return out
 
 
+class DeadlineSleeper:
+    """Sleep until a ``time.perf_counter()`` deadline, sub-millisecond precise.
+
+    An OS sleep wakes up late by a scheduling latency that depends on the load
+    (about 0.1 ms on an idle machine, several milliseconds on a busy one). The
+    sleeper sleeps until ``margin`` before the deadline and spin-waits the rest,
+    and adapts ``margin`` to the wake-up latencies it observes: it jumps to
+    1.5 x a late wake-up and decays by 2 % per sleep, within ``[min_margin,
+    max_margin]``. So an idle machine burns little CPU spinning, and a busy one
+    still meets its deadlines.
+
+    Args:
+        min_margin: Smallest spin margin in seconds.
+        max_margin: Largest spin margin in seconds.
+        clock: The clock (``time.perf_counter``); injectable for tests.
+        sleep: The OS sleep (``time.sleep``); injectable for tests.
+    """
+
+    def __init__(self, min_margin: float = 0.0005, max_margin: float = 0.003,
+                 clock: Callable[[], float] = time.perf_counter,
+                 sleep: Callable[[float], None] = time.sleep) -> None:
+        self.min_margin = min_margin
+        self.max_margin = max_margin
+        self.margin = _SPIN_MARGIN_S
+        self._clock = clock
+        self._sleep = sleep
+
+    def sleep_until(self, deadline: float) -> None:
+        """Return at ``deadline``, never before."""
+        clock = self._clock
+        remaining = deadline - clock()
+        if remaining > self.margin:
+            wake = deadline - self.margin
+            self._sleep(remaining - self.margin)
+            late = clock() - wake
+            self.margin = min(self.max_margin,
+                              max(self.min_margin, 1.5 * late, 0.98 * self.margin))
+        while clock() < deadline:
+            pass
+
+
 def sleep_until(deadline: float) -> None:
-    """Return at ``deadline`` (a ``time.perf_counter()`` value), sub-millisecond precise."""
-    while True:
-        remaining = deadline - time.perf_counter()
-        if remaining <= 0.0:
-            return
-        if remaining > _SPIN_MARGIN_S:
-            time.sleep(remaining - _SPIN_MARGIN_S)
+    """Return at ``deadline`` (a ``time.perf_counter()`` value) with a fixed 1.5 ms spin."""
+    DeadlineSleeper(_SPIN_MARGIN_S, _SPIN_MARGIN_S).sleep_until(deadline)
 
 
 class Player:
@@ -136,6 +175,7 @@ class Player:
         self.options = options
         self.stats = PlayStats()
         self._stop = threading.Event()
+        self.sleeper = DeadlineSleeper()
         self.publishers: dict[str, Any] = {}
         wanted = list(reader.topics) if options.topics is None else list(options.topics)
         missing = [t for t in wanted if t not in reader.topics]
@@ -194,77 +234,74 @@ class Player:
                 topics=list(self.publishers), start_ns=start):
             yield topic, stamp, raw
 
-    def _put(self, out: queue.Queue, item: object) -> bool:
-        """Queue ``item`` unless asked to stop; return False when stopping."""
-        while not self._stop.is_set():
-            try:
-                out.put(item, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
-
-    def _prefetch(self, out: queue.Queue) -> None:
-        try:
-            while True:
-                for item in self._messages():
-                    if not self._put(out, item):
-                        return
-                if not self._put(out, None):  # end of one pass
-                    return
-                if not self.options.loop:
-                    break
-        except Exception as error:  # noqa: BLE001 - reported in the main thread
-            self._put(out, error)
-        self._put(out, _END)
-
     def play(self) -> PlayStats:
         """Publish the bag (every pass when looping); return the statistics."""
         if self.reader.start_ns is None:
             _LOG.warning('bag %s has no messages to play', self.reader.path)
             return self.stats
-        feed: queue.Queue = queue.Queue(maxsize=_QUEUE_MESSAGES)
-        thread = threading.Thread(target=self._prefetch, args=(feed,), daemon=True)
-        thread.start()
-        rate = self.options.rate
-        clock_period = None if self.options.clock_hz is None else 1.0 / self.options.clock_hz
-        item: object = None
         try:
             while not self._stop.is_set():
-                wall0 = bag0 = None
-                prev: tuple[float, float] | None = None  # (due, achieved) of the last message
-                next_clock = None
-                while not self._stop.is_set():
-                    item = feed.get()
-                    if item is None or item is _END:
-                        break
-                    if isinstance(item, Exception):
-                        raise VisibilityBuilderError(f'cannot read bag: {item}') from item
-                    topic, stamp, raw = item
-                    if wall0 is None:
-                        wall0, bag0 = time.perf_counter(), stamp
-                        next_clock = wall0
-                    due = wall0 + (stamp - bag0) / 1e9 / rate
-                    if clock_period is not None:
-                        while next_clock <= due and not self._stop.is_set():
-                            sleep_until(next_clock)
-                            self._publish_clock(bag0 + int((next_clock - wall0) * rate * 1e9))
-                            next_clock += clock_period
-                    sleep_until(due)
-                    self.publishers[topic].publish(raw)
-                    achieved = time.perf_counter()
-                    self.stats.published += 1
-                    self.stats.lateness_s.append(achieved - due)
-                    if prev is not None:
-                        self.stats.interval_error_s.append((achieved - prev[1]) - (due - prev[0]))
-                    prev = (due, achieved)
-                if item is _END or not self.options.loop:
+                played = self._play_pass()
+                if not self.options.loop or not played:
                     break
         finally:
             self._stop.set()
-            thread.join(timeout=5.0)
         self._wait_for_acks()
         return self.stats
+
+    def _play_pass(self) -> int:
+        """Publish one pass over the bag; return the number of messages published.
+
+        Reading runs in this thread, in the slack before each deadline: the next
+        messages are fetched only while the next one is more than
+        ``_READ_SLACK_S`` away, so decompressing a chunk never delays a publish
+        (and no second thread competes for the GIL).
+        """
+        source = self._messages()
+        ahead: deque[tuple[str, int, bytes]] = deque()
+        exhausted = False
+
+        def fetch(until: float) -> None:
+            nonlocal exhausted
+            while (not exhausted and len(ahead) < _READ_AHEAD_MESSAGES
+                   and time.perf_counter() < until):
+                try:
+                    ahead.append(next(source))
+                except StopIteration:
+                    exhausted = True
+
+        fetch(time.perf_counter() + _READ_START_S)
+        if not ahead:
+            return 0
+        rate = self.options.rate
+        clock_period = None if self.options.clock_hz is None else 1.0 / self.options.clock_hz
+        wall0, bag0 = time.perf_counter(), ahead[0][1]
+        next_clock = wall0
+        prev: tuple[float, float] | None = None  # (due, achieved) of the last message
+        published = 0
+        while ahead and not self._stop.is_set():
+            topic, stamp, raw = ahead[0]
+            due = wall0 + (stamp - bag0) / 1e9 / rate
+            if clock_period is not None:
+                while next_clock <= due and not self._stop.is_set():
+                    fetch(next_clock - _READ_SLACK_S)
+                    self.sleeper.sleep_until(next_clock)
+                    self._publish_clock(bag0 + int((next_clock - wall0) * rate * 1e9))
+                    next_clock += clock_period
+            fetch(due - _READ_SLACK_S)
+            self.sleeper.sleep_until(due)
+            self.publishers[topic].publish(raw)
+            achieved = time.perf_counter()
+            ahead.popleft()
+            published += 1
+            self.stats.published += 1
+            self.stats.lateness_s.append(achieved - due)
+            if prev is not None:
+                self.stats.interval_error_s.append((achieved - prev[1]) - (due - prev[0]))
+            prev = (due, achieved)
+            if not ahead:
+                fetch(float('inf'))  # nothing left to publish: read now
+        return published
 
     def _publish_clock(self, stamp_ns: int) -> None:
         assert self.clock_publisher is not None
