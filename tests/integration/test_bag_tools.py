@@ -74,13 +74,14 @@ def write_synthetic_bag(path: Path, n: int = 15, rate_hz: float = 30.0,
                 '/odom': odom,
             }
             if i < 3:
-                msgs['/chatter'] = T['std_msgs/msg/String'](data=f'hello {i} ✓')
+                msgs['/chatter'] = T['std_msgs/msg/String'](data=f'hello {i} ✓' + '!' * i)
             if with_tf:
                 msgs['/tf'] = T['tf2_msgs/msg/TFMessage'](transforms=[])
             for k, (topic, msg) in enumerate(msgs.items()):
                 bag.write(conns[topic], stamp + k, msg)  # distinct times: a fixed order
-                raw.setdefault(topic, []).append(
-                    bytes(TYPESTORE.serialize_cdr(msg, conns[topic].msgtype)))
+    with open_bag(path) as reader:  # what play will publish
+        for topic, _msgtype, _stamp, data in reader.messages():
+            raw.setdefault(topic, []).append(data)
     return raw
 
 

@@ -433,3 +433,14 @@ def test_string_messages_round_trip(tmp_path_factory: pytest.TempPathFactory,
         assert got == texts
         assert reader.message_count == len(texts)
     assert os.listdir(path.parent) == ['bag']
+
+
+@settings(max_examples=30, deadline=None)
+@given(text=st.text(max_size=50))
+def test_serialize_pads_to_a_dds_payload_and_round_trips(text: str) -> None:
+    raw = serialize(T['std_msgs/msg/String'](data=text), 'std_msgs/String')
+    unpadded = bytes(TYPESTORE.serialize_cdr(T['std_msgs/msg/String'](data=text),
+                                             'std_msgs/msg/String'))
+    assert len(raw) % 4 == 0 and len(raw) - len(unpadded) < 4
+    assert raw == unpadded + bytes(len(raw) - len(unpadded))
+    assert deserialize(raw, 'std_msgs/msg/String').data == text

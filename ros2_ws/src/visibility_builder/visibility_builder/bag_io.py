@@ -391,6 +391,12 @@ def normalize_msgtype(msgtype: str) -> str:
 def serialize(message: object, msgtype: str, typestore: Any = None) -> bytes:
     """Serialize a rosbags message object to CDR bytes (little endian).
 
+    The result is padded with zeros to a multiple of 4 bytes, as a DDS serialized
+    payload is: Fast DDS pads every message it delivers that way, so a bag of
+    padded messages is what ``ros2 bag record`` (or ``vbn record``) writes, and a
+    play-to-record round trip reproduces it byte for byte. Every CDR reader
+    ignores the trailing padding.
+
     Raises:
         VisibilityBuilderError: Unknown type or a message that does not fit it.
     """
@@ -399,10 +405,11 @@ def serialize(message: object, msgtype: str, typestore: Any = None) -> bytes:
     if msgtype not in store.fielddefs:
         raise VisibilityBuilderError(f'unknown message type {msgtype!r}')
     try:
-        return bytes(store.serialize_cdr(message, msgtype))
+        data = bytes(store.serialize_cdr(message, msgtype))
     except Exception as error:  # noqa: BLE001 - rosbags raises many kinds here
         raise VisibilityBuilderError(
             f'cannot serialize {type(message).__name__} as {msgtype}: {error}') from None
+    return data + bytes(-len(data) % 4)
 
 
 def deserialize(rawdata: bytes | memoryview, msgtype: str, typestore: Any = None) -> Any:
