@@ -283,3 +283,13 @@ def test_play_publishes_clock_at_bag_time(tmp_path: Path, start_process) -> None
     clock = yaml.safe_load(echo.output.split('---\n')[0])['clock']
     stamp = clock['sec'] + clock['nanosec'] * 1e-9
     assert 1_763_769_600 <= stamp <= 1_763_769_601  # inside the bag's 1 s, not wall time
+
+
+def test_record_stops_after_its_duration_with_a_valid_bag(tmp_path: Path, start_process) -> None:
+    code, output = run_vbn(start_process, 'record', '--topics', '/nobody/publishes/this',
+                           '--out', str(tmp_path / 'short'), '--duration', '1')
+    assert code == 0, output
+    assert 'wrote 0 messages' in output
+    with open_bag(tmp_path / 'short') as reader:
+        assert reader.message_count == 0 and not reader.recovered
+        assert reader.warnings == [f'bag {tmp_path / "short"} contains no messages']
