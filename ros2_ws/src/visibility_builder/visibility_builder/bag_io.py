@@ -92,6 +92,7 @@ ROSBAG2_VERSION = 8
 _MCAP_MAGIC = b'\x89MCAP0\r\n'
 _OP_HEADER, _OP_FOOTER, _OP_SCHEMA, _OP_CHANNEL, _OP_MESSAGE, _OP_CHUNK = 1, 2, 3, 4, 5, 6
 _OP_DATA_END = 0x0F
+_OP_LAST = 0x10  # highest opcode of MCAP v0 (0x80 and above: user records)
 
 
 class BagWriter:
@@ -503,6 +504,7 @@ class BagReader:
         self._reader: Reader | None = None
         self._scan: _ScanResult | None = None
         self._typestore: Any = None
+        self._known: dict[Path, dict[int, _Channel]] = {}
         self.files = self._resolve_files()
         self._open()
 
@@ -568,7 +570,7 @@ class BagReader:
             try:
                 reader = Reader(reader_path)
                 reader.open()
-            except (ReaderError, struct.error, ValueError, OSError, EOFError) as error:
+            except _READ_ERRORS as error:
                 reader = None
                 self._recover(error)
         else:
@@ -584,8 +586,9 @@ class BagReader:
             self._warn(
                 f'bag {self.path} is damaged ({_one_line(error)}); reading its intact part')
         scan = _ScanResult()
+        self._known = {file: _top_level_channels(file) for file in self.files}
         for file in self.files:
-            for _ in _scan_mcap(file, scan, want=None):
+            for _ in _scan_mcap(file, scan, want=None, known=self._known[file]):
                 pass
         for problem in scan.problems:
             self._warn(problem)
@@ -685,8 +688,7 @@ class BagReader:
                     last_stamp = stamp
                     yield conn.topic, conn.msgtype, stamp, bytes(raw)
                 return
-            except (ReaderError, zstd.ZstdError, struct.error, ValueError, EOFError,
-                    OSError, IndexError, TypeError) as error:
+            except _READ_ERRORS as error:
                 self._warn(
                     f'bag {self.path} is corrupted ({_one_line(error)}) after {done} '
                     'messages; skipping the damaged chunk(s) and reading on')
@@ -704,7 +706,8 @@ class BagReader:
             return
         scan = _ScanResult()
         for file in self.files:
-            for chan, stamp, raw in _scan_mcap(file, scan, want=keep):
+            for chan, stamp, raw in _scan_mcap(file, scan, want=keep,
+                                               known=self._known.get(file)):
                 yield chan.topic, chan.msgtype, stamp, raw
 
     def _indexed_channels(self, file: Path) -> dict[int, _Channel]:
@@ -808,6 +811,12 @@ def _topics_from_channels(
     return dict(sorted(topics.items()))
 
 
+# What reading a damaged MCAP file can raise, in rosbags or here (a garbage length
+# field can make a reader try to allocate or index far beyond the file).
+_READ_ERRORS = (ReaderError, zstd.ZstdError, struct.error, ValueError, EOFError, OSError,
+                IndexError, TypeError, KeyError, OverflowError, MemoryError, UnicodeDecodeError)
+
+
 class _TruncatedError(Exception):
     """The MCAP data ends inside a record."""
 
@@ -854,6 +863,75 @@ def _decompress_partial(data: bytes, compression: str) -> bytes:
     raise ValueError(f'unsupported chunk compression {compression!r}')
 
 
+def _parse_schema(body: bytes) -> tuple[int, str, str]:
+    """Parse an MCAP schema record: (id, type name, definition text)."""
+    (sid,) = struct.unpack_from('<H', body, 0)
+    name, pos = _string(body, 2)
+    _encoding, pos = _string(body, pos)
+    (size,) = struct.unpack_from('<I', body, pos)
+    return sid, name, body[pos + 4:pos + 4 + size].decode('utf-8')
+
+
+def _parse_channel(body: bytes) -> tuple[int, int, str, list[Qos]]:
+    """Parse an MCAP channel record: (id, schema id, topic, offered QoS)."""
+    cid, sid = struct.unpack_from('<HH', body, 0)
+    topic, pos = _string(body, 4)
+    _encoding, pos = _string(body, pos)
+    qos: list[Qos] = []
+    (map_size,) = struct.unpack_from('<I', body, pos)
+    pos += 4
+    end = pos + map_size
+    while pos < end:
+        key, pos = _string(body, pos)
+        value, pos = _string(body, pos)
+        if key == 'offered_qos_profiles':
+            try:
+                qos = parse_qos(value)
+            except Exception:  # noqa: BLE001 - QoS is optional information
+                qos = []
+    return cid, sid, topic, qos
+
+
+def _top_level_channels(file: Path) -> dict[int, _Channel]:
+    """Collect the schema and channel records outside chunks, the summary's included.
+
+    The first chunk usually holds the only in-data copy of the channel records; when
+    it is lost, the copies in the summary section (if readable) still name every
+    channel. Records that do not parse are skipped; the walk stops at the footer or
+    at a record that is not MCAP.
+    """
+    size = file.stat().st_size
+    schemas: dict[int, tuple[str, str]] = {}
+    raw_channels: dict[int, tuple[int, str, list[Qos]]] = {}
+    with file.open('rb') as stream:
+        offset = 8
+        while offset + 9 <= size:
+            stream.seek(offset)
+            head = stream.read(9)
+            op = head[0]
+            (length,) = struct.unpack_from('<Q', head, 1)
+            if op == _OP_FOOTER or (op > _OP_LAST and op < 0x80) or op == 0:
+                break
+            if op in (_OP_SCHEMA, _OP_CHANNEL) and length <= size - offset - 9:
+                body = stream.read(length)
+                try:
+                    if op == _OP_SCHEMA:
+                        sid, name, msgdef = _parse_schema(body)
+                        schemas.setdefault(sid, (name, msgdef))
+                    else:
+                        cid, sid, topic, qos = _parse_channel(body)
+                        raw_channels.setdefault(cid, (sid, topic, qos))
+                except (ValueError, struct.error, UnicodeDecodeError, IndexError):
+                    pass
+            offset += 9 + length
+    out = {}
+    for cid, (sid, topic, qos) in raw_channels.items():
+        name, msgdef = schemas.get(sid, ('', ''))
+        if name:
+            out[cid] = _Channel(topic, name, qos, msgdef)
+    return out
+
+
 def _scan_mcap(
     file: Path,
     scan: _ScanResult,
@@ -881,27 +959,10 @@ def _scan_mcap(
         op: int, body: bytes, in_chunk: bool, partial: bool,
     ) -> Iterator[tuple[_Channel, int, bytes]]:
         if op == _OP_SCHEMA:
-            (sid,) = struct.unpack_from('<H', body, 0)
-            name, pos = _string(body, 2)
-            _encoding, pos = _string(body, pos)
-            (size,) = struct.unpack_from('<I', body, pos)
-            schemas[sid] = (name, body[pos + 4:pos + 4 + size].decode('utf-8'))
+            sid, name, msgdef = _parse_schema(body)
+            schemas[sid] = (name, msgdef)
         elif op == _OP_CHANNEL:
-            cid, sid = struct.unpack_from('<HH', body, 0)
-            topic, pos = _string(body, 4)
-            _encoding, pos = _string(body, pos)
-            qos: list[Qos] = []
-            (map_size,) = struct.unpack_from('<I', body, pos)
-            pos += 4
-            end = pos + map_size
-            while pos < end:
-                key, pos = _string(body, pos)
-                value, pos = _string(body, pos)
-                if key == 'offered_qos_profiles':
-                    try:
-                        qos = parse_qos(value)
-                    except Exception:  # noqa: BLE001 - QoS is optional information
-                        qos = []
+            cid, sid, topic, qos = _parse_channel(body)
             name, msgdef = schemas.get(sid, ('', ''))
             if cid not in channels:
                 channels[cid] = _Channel(topic, name, qos, msgdef)
@@ -949,6 +1010,7 @@ def _scan_mcap(
                 raise
             yield from out
 
+    size = file.stat().st_size
     with file.open('rb') as stream:
         stream.read(8)  # magic, checked by the caller
         offset = 8
@@ -964,13 +1026,19 @@ def _scan_mcap(
             (length,) = struct.unpack_from('<Q', head, 1)
             if op == _OP_FOOTER:
                 break
-            body = stream.read(length)
+            if not _OP_HEADER <= op <= _OP_LAST and op < 0x80:
+                scan.problems.append(
+                    f'{file.name}: invalid record (opcode {op:#04x}) at byte {offset}; '
+                    'stopped there')
+                break
+            # A garbage length must not make us allocate it: read what the file has.
+            body = stream.read(min(length, size - offset - 9))
             partial = len(body) < length
             before = sum(scan.counts.values())
             try:
                 yield from handle(op, body, False, partial)
             except (ValueError, struct.error, _TruncatedError, zstd.ZstdError, UnicodeDecodeError,
-                    IndexError, ImportError) as error:
+                    IndexError, ImportError, OverflowError, MemoryError) as error:
                 if op == _OP_CHUNK and not partial:
                     bad_chunks += 1
                 elif not partial:
@@ -980,7 +1048,8 @@ def _scan_mcap(
                     break
             if partial:
                 kept = sum(scan.counts.values()) - before
-                what = f'; kept {kept} messages of the cut chunk' if op == _OP_CHUNK else ''
+                what = (f'; kept {kept} messages of the cut chunk (unverified: its checksum '
+                        'is in the lost part)') if op == _OP_CHUNK else ''
                 scan.problems.append(
                     f'{file.name} is truncated at byte {offset + 9 + len(body)}, inside a '
                     f'record that starts at byte {offset}{what}')
