@@ -33,10 +33,11 @@ from dataclasses import replace
 import logging
 
 import numpy as np
+import scipy.sparse as sp
 
-from landmark_db.decomposition.exact import solve_set_cover
+from landmark_db.decomposition.exact import relaxed_uncovered, solve_set_cover
 from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
-from landmark_db.decomposition.problem import ZeroProblem, split_components
+from landmark_db.decomposition.problem import ZeroProblem, component_of, split_components
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.shrink_regions import shrink_regions
 from landmark_db.errors import LandmarkDbError
@@ -47,17 +48,18 @@ _LOG = logging.getLogger(__name__)
 
 
 def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.0,
-               multiplicity: int = 3, max_seeds: int | None = None,
+               multiplicity: int = 8, max_seeds: int | None = None, merge_rounds: int = 3,
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Run the ``best`` heuristic on a 0-MORDP instance.
 
     Args:
         problem: the reduced instance.
         alpha: algorithm C's alpha (C's regions seed the pool).
-        time_limit: seconds for the set-cover solver.
+        time_limit: seconds for each set-cover MILP.
         multiplicity: stop seeding once every k-coverable pose lies in this many
             candidates.
         max_seeds: most seeds to grow candidates from; default ``n_poses // 4``.
+        merge_rounds: rounds of merge candidates plus local search after the cover.
 
     Returns:
         Regions as (sorted pose indices, k landmark columns).
@@ -67,19 +69,225 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
     reference = shrink_regions(problem, 'B2')
     budget = _uncovered_count(reference, coverable)
     pool = _Pool(n)
-    for region in reference:
-        pool.add(*region)
+    pool.reference = [pool.add(*region) for region in reference]
     extra = shrink_regions(problem, 'B1') + neighbourhood_seeds(problem, alpha)
     if problem.sigma:
         extra += shrink_regions(replace(problem, sigma=0), 'B2')
     for region in extra:
         pool.add(*region)
+    _add_seeded_candidates(problem, pool, multiplicity, max_seeds)
 
-    sizes = np.array([poses.size for poses, _ in pool.poses_landmarks()], dtype=float)
+    required = np.flatnonzero(coverable)
+    try:
+        chosen = _partial_cover(problem, pool, required, budget, time_limit)
+        for _ in range(merge_rounds):
+            if chosen is None:
+                break
+            added = _add_merge_candidates(problem, pool, chosen)
+            if not added:
+                break
+            matrix, weight = _merged_rows(n, required, pool.poses)
+            start = np.zeros(len(pool.poses), dtype=bool)
+            start[chosen] = True
+            improved = np.flatnonzero(_local_search(matrix, weight, start, budget))
+            if improved.size >= chosen.size:
+                break
+            chosen = improved
+    except LandmarkDbError as error:
+        _LOG.warning('best: set cover failed (%s); keeping B.2', error)
+        return reference
+    if chosen is None:
+        return reference
+    regions = [(pool.poses[i], pool.landmarks[i]) for i in chosen]
+    regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
+    _LOG.debug('best: %d candidates, %d regions (%d uncovered); B.2 %d (%d)', len(pool.poses),
+               len(regions), _uncovered_count(regions, coverable), len(reference), budget)
+    if (len(regions), _uncovered_count(regions, coverable)) > (len(reference), budget):
+        return reference
+    return regions
+
+
+def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budget: int,
+                   time_limit: float) -> np.ndarray | None:
+    """Fewest pool regions leaving at most ``budget`` required poses uncovered.
+
+    With budget 0 this is one exact set-cover MILP. Otherwise the budgeted MILP is
+    hard for HiGHS, so: the LP relaxation marks the poses worth giving up (relaxed
+    "uncovered" value y > 1/2), the rest are covered exactly by a MILP, and a local
+    search on the budgeted problem improves that start (and B.2's own solution):
+    drop a region while the budget allows, replace two regions by one candidate,
+    or swap one region for a candidate that covers more (creating slack for drops).
+    """
+    n = problem.n_poses
+    if budget == 0:
+        return solve_set_cover(n, required, pool.poses, time_limit)[0]
+    matrix, weight = _merged_rows(n, required, pool.poses)
+    y = relaxed_uncovered(n, required, pool.poses, budget)
+    start = np.zeros(len(pool.poses), dtype=bool)
+    try:
+        chosen, _ = solve_set_cover(n, required[y <= 0.5], pool.poses, time_limit)
+        start[chosen] = True
+    except LandmarkDbError:
+        pass
+    if not start.any() or _uncovered_weight(matrix, weight, start) > budget:
+        start[:] = False
+        start[pool.reference] = True  # B.2's own solution is always within budget
+    return np.flatnonzero(_local_search(matrix, weight, start, budget))
+
+
+def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, chosen: np.ndarray) -> int:
+    """Add candidates aimed at replacing two neighbouring chosen regions by one.
+
+    For every pair of chosen regions that touch (share or neighbour a pose), the poses
+    only they cover form R; k features are chosen greedily by how many poses of R see
+    them (as in B.x), and the component of {v : L subset of F_v} meeting R most is
+    added to the pool.
+
+    Returns:
+        The number of new candidates.
+    """
+    n = problem.n_poses
+    d = chosen.size
+    if d < 2:
+        return 0
+    membership = np.zeros(n, dtype=np.int64)
+    for i in chosen:
+        membership[pool.poses[i]] += 1
+    owner = np.full(n, -1, dtype=np.int64)
+    label_rows, label_cols = [], []
+    for slot, i in enumerate(chosen):
+        poses = pool.poses[i]
+        owner[poses[membership[poses] == 1]] = slot
+        label_rows.append(poses)
+        label_cols.append(np.full(poses.size, slot))
+    member = sp.csr_matrix((np.ones(sum(p.size for p in label_rows)),
+                            (np.concatenate(label_rows), np.concatenate(label_cols))),
+                           shape=(n, d))
+    hood = (problem.adjacency.astype(np.float64) + sp.identity(n, format='csr')) @ member
+    touch = (member.T @ hood).tocoo()
+    pairs = {(min(a, b), max(a, b)) for a, b in zip(touch.row, touch.col) if a != b}
+    before = len(pool.poses)
+    for a, b in sorted(pairs):
+        area = np.flatnonzero((owner == a) | (owner == b))
+        if area.size == 0:
+            continue
+        region = area
+        chosen_cols: list[int] = []
+        for _ in range(problem.k):
+            scores = problem.feature_counts(region)
+            scores[chosen_cols] = 0
+            col = problem.best_feature(scores)
+            if col < 0:
+                break
+            chosen_cols.append(col)
+            region = problem.keep_seeing(region, col)
+        if len(chosen_cols) < problem.k or region.size == 0:
+            continue
+        landmark = np.asarray(chosen_cols, dtype=np.int64)
+        pool.add(component_of(problem.adjacency, problem.poses_seeing_all(landmark),
+                              int(region[0])), landmark)
+    return len(pool.poses) - before
+
+
+def _merged_rows(n_poses: int, required: np.ndarray,
+                 sets: list[np.ndarray]) -> tuple[sp.csc_matrix, np.ndarray]:
+    """Return the (merged rows x sets) cover matrix and each merged row's pose count."""
+    sizes = np.array([s.size for s in sets], dtype=np.int64)
+    row_index = np.full(n_poses, -1, dtype=np.int64)
+    row_index[required] = np.arange(required.size)
+    flat = np.concatenate(sets)
+    cols = np.repeat(np.arange(len(sets)), sizes)
+    keep = row_index[flat] >= 0
+    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
+                           shape=(required.size, len(sets)))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    groups: dict[bytes, int] = {}
+    for r in range(matrix.shape[0]):
+        key = matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes()
+        groups[key] = groups.get(key, 0) + 1
+    first: dict[bytes, int] = {}
+    for r in range(matrix.shape[0]):
+        first.setdefault(matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes(), r)
+    merged = matrix[np.fromiter(first.values(), dtype=np.int64)]
+    weight = np.fromiter((groups[key] for key in first), dtype=float)
+    return sp.csc_matrix(merged), weight
+
+
+def _uncovered_weight(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndarray) -> float:
+    count = np.asarray(matrix[:, np.flatnonzero(chosen)].sum(axis=1)).ravel()
+    return float(weight[count == 0].sum())
+
+
+def _local_search(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndarray,
+                  budget: float, max_dense: float = 2e7) -> np.ndarray:
+    """Improve a budgeted partial cover by drop, 2-for-1 and coverage-gaining swap moves.
+
+    Every accepted move keeps the uncovered weight within ``budget`` and either
+    lowers the region count or keeps it and strictly lowers the uncovered weight, so
+    the search terminates.
+    """
+    chosen = chosen.copy()
+    n_sets = matrix.shape[1]
+    transposed = sp.csr_matrix(matrix.T)
+    while True:
+        idx = np.flatnonzero(chosen)
+        d = idx.size
+        sub = matrix[:, idx]
+        count = np.asarray(sub.sum(axis=1)).ravel()
+        uncovered = float(weight[count == 0].sum())
+        single = sub.multiply(((count == 1) * weight)[:, None]).tocsc()
+        loss = np.asarray(single.sum(axis=0)).ravel()
+        if d:
+            cheapest = int(np.argmin(loss))
+            if uncovered + loss[cheapest] <= budget:
+                chosen[idx[cheapest]] = False
+                continue
+        if d < 2 or n_sets * d > max_dense:
+            break
+        gain = (transposed @ single).toarray()  # candidate x region: weight regained
+        gain_free = transposed @ ((count == 0) * weight)
+        gain[idx, :] = -np.inf
+        gain_free[idx] = -np.inf
+        both = (sub.T @ sp.diags((count == 2) * weight) @ sub).toarray()
+        # Only pairs some candidate regains poses from both can be merged.
+        useful = (gain > 0).astype(np.float64)
+        pairs = np.triu(useful.T @ useful > 0, k=1)
+        best = None
+        for i in np.flatnonzero(pairs.any(axis=1)):
+            js = np.flatnonzero(pairs[i])
+            need = uncovered + loss[i] + loss[js] + both[i, js] - budget
+            slack = gain[:, [i]] + gain[:, js] + gain_free[:, None] - need[None, :]
+            c, j = np.unravel_index(int(np.argmax(slack)), slack.shape)
+            if slack[c, j] >= 0 and (best is None or slack[c, j] > best[0]):
+                best = (slack[c, j], c, i, int(js[j]))
+        if best is not None:
+            _, c, i, j = best
+            chosen[idx[i]] = chosen[idx[j]] = False
+            chosen[c] = True
+            continue
+        improvement = gain + gain_free[:, None] - loss[None, :]
+        c, i = np.unravel_index(int(np.argmax(improvement)), improvement.shape)
+        if improvement[c, i] > 0.5:
+            chosen[idx[i]] = False
+            chosen[c] = True
+            continue
+        break
+    return chosen
+
+
+def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, multiplicity: int,
+                           max_seeds: int | None) -> None:
+    """Grow candidates around the k-coverable poses lying in the fewest candidates."""
+    n = problem.n_poses
+    coverable = problem.coverable
+    sizes = np.array([poses.size for poses in pool.poses], dtype=float)
     typical = max(1, int(round(np.sqrt(np.median(sizes) / 2.0)))) if sizes.size else 1
     radii = sorted({max(1, typical // 2), typical, 2 * typical})
     seeds_left = max_seeds if max_seeds is not None else max(1, n // 4)
     seeded = np.zeros(n, dtype=bool)
+    everywhere_counts = problem.feature_counts(np.flatnonzero(coverable))
+    cache = _ComponentCache(problem)
     while seeds_left > 0:
         counts = pool.counts
         open_mask = coverable & ~seeded & (counts < multiplicity)
@@ -90,23 +298,9 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
         seed = int(candidates[np.argmin(keys)])
         seeded[seed] = True
         seeds_left -= 1
-        for region in _grow_candidates(problem, seed, coverable, radii):
+        for region in _grow_candidates(problem, seed, coverable, everywhere_counts, cache,
+                                       radii):
             pool.add(*region)
-
-    required = np.flatnonzero(coverable)
-    try:
-        chosen, optimal = solve_set_cover(n, required, pool.poses, time_limit, budget)
-    except LandmarkDbError as error:
-        _LOG.warning('best: set cover failed (%s); keeping B.2', error)
-        return reference
-    regions = [(pool.poses[i], pool.landmarks[i]) for i in chosen]
-    regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
-    _LOG.debug('best: %d candidates, %d regions (optimal %s, %d uncovered); B.2 %d (%d)',
-               len(pool.poses), len(regions), optimal, _uncovered_count(regions, coverable),
-               len(reference), budget)
-    if (len(regions), _uncovered_count(regions, coverable)) > (len(reference), budget):
-        return reference
-    return regions
 
 
 def _uncovered_count(regions: list[tuple[np.ndarray, np.ndarray]],
@@ -152,48 +346,73 @@ class _Pool:
         self.poses: list[np.ndarray] = []
         self.landmarks: list[np.ndarray] = []
         self.counts = np.zeros(n_poses, dtype=np.int64)
-        self._seen: set[bytes] = set()
+        self.reference: list[int] = []
+        self._seen: dict[bytes, int] = {}
 
-    def add(self, poses: np.ndarray, landmark: np.ndarray) -> None:
+    def add(self, poses: np.ndarray, landmark: np.ndarray) -> int:
+        """Add a candidate (ignored if already present); return its index."""
         key = poses.tobytes()
         if key in self._seen:
-            return
-        self._seen.add(key)
+            return self._seen[key]
+        self._seen[key] = len(self.poses)
         self.poses.append(poses)
         self.landmarks.append(np.sort(landmark))
         self.counts[poses] += 1
+        return len(self.poses) - 1
 
     def poses_landmarks(self) -> list[tuple[np.ndarray, np.ndarray]]:
         return list(zip(self.poses, self.landmarks))
 
 
-def _grow_candidates(problem: ZeroProblem, seed: int, required: np.ndarray,
+def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
+                     everywhere_counts: np.ndarray, cache: _ComponentCache,
                      radii: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Return candidate regions around ``seed``, one per radius plus an unbounded one."""
     layers = _bfs_layers(problem, seed, max(radii))
     allowed = problem.row_features(seed)
     out = []
-    balls = [np.concatenate(layers[:t + 1]) for t in radii] + [np.flatnonzero(required)]
+    balls: list[np.ndarray | None] = [np.concatenate(layers[:t + 1]) for t in radii]
+    balls.append(None)  # unbounded: every k-coverable pose
     for ball in balls:
-        region = ball[required[ball]]
+        region = None if ball is None else ball[coverable[ball]]
         chosen: list[int] = []
         for _ in range(problem.k):
-            scores = problem.feature_counts(region)
+            scores = everywhere_counts.copy() if region is None else \
+                problem.feature_counts(region)
             scores[chosen] = 0
             col = problem.best_feature(scores, allowed)
             if col < 0:
                 break
             chosen.append(col)
-            region = region[np.isin(region, problem.column_poses(col), assume_unique=True)]
+            region = problem.column_poses(col)[coverable[problem.column_poses(col)]] \
+                if region is None else problem.keep_seeing(region, col)
         if len(chosen) < problem.k:
             continue
-        landmark = np.asarray(chosen, dtype=np.int64)
-        full = problem.poses_seeing_all(landmark)
-        for piece in split_components(problem.adjacency, full):
-            if np.any(piece == seed):
-                out.append((piece, landmark))
-                break
+        landmark = np.sort(np.asarray(chosen, dtype=np.int64))
+        out.append((cache.component(landmark, seed), landmark))
     return out
+
+
+class _ComponentCache:
+    """Connected components of {v : L subset of F_v}, computed once per landmark L."""
+
+    def __init__(self, problem: ZeroProblem) -> None:
+        self.problem = problem
+        self._pieces: dict[bytes, list[np.ndarray]] = {}
+
+    def component(self, landmark: np.ndarray, seed: int) -> np.ndarray:
+        """Return the component holding ``seed`` (which must see all of ``landmark``)."""
+        key = landmark.tobytes()
+        pieces = self._pieces.get(key)
+        if pieces is None:
+            pieces = split_components(self.problem.adjacency,
+                                      self.problem.poses_seeing_all(landmark))
+            self._pieces[key] = pieces
+        for piece in pieces:
+            at = int(np.searchsorted(piece, seed))
+            if at < piece.size and piece[at] == seed:
+                return piece
+        raise AssertionError('seed does not see its landmark')
 
 
 def _bfs_layers(problem: ZeroProblem, seed: int, depth: int) -> list[np.ndarray]:

@@ -25,13 +25,13 @@ import itertools
 import math
 
 import numpy as np
-from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.optimize import Bounds, LinearConstraint, linprog, milp
 import scipy.sparse as sp
 
 from landmark_db.decomposition.problem import ZeroProblem, split_components
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['candidate_regions', 'exact_cover', 'solve_set_cover']
+__all__ = ['candidate_regions', 'exact_cover', 'relaxed_uncovered', 'solve_set_cover']
 
 MAX_SUBSETS = 200_000
 MAX_CANDIDATES = 50_000
@@ -162,6 +162,50 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
         raise LandmarkDbError(f'set cover: HiGHS found no cover ({result.message})')
     chosen = np.flatnonzero(result.x[:n_sets] > 0.5)
     return chosen, bool(result.status == 0)
+
+
+def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
+                      budget: int) -> np.ndarray:
+    """Solve the LP relaxation of the budgeted partial cover; return y per required pose.
+
+    min sum x_j s.t. sum_{j: v in S_j} x_j + y_v >= 1, sum y_v <= budget, 0 <= x, y <= 1.
+    ``y_v`` near 1 marks poses the relaxation prefers to leave uncovered.
+
+    Returns:
+        ``(len(required),)`` float y values (0 when the LP fails).
+    """
+    if required.size == 0 or not sets:
+        return np.ones(required.size)
+    sizes = np.array([s.size for s in sets], dtype=np.int64)
+    row_index = np.full(n_poses, -1, dtype=np.int64)
+    row_index[required] = np.arange(required.size)
+    flat = np.concatenate(sets)
+    cols = np.repeat(np.arange(len(sets)), sizes)
+    keep = row_index[flat] >= 0
+    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
+                           shape=(required.size, len(sets)))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    groups: dict[bytes, list[int]] = {}
+    for r in range(matrix.shape[0]):
+        groups.setdefault(matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes(),
+                          []).append(r)
+    members = list(groups.values())
+    merged = matrix[np.array([m[0] for m in members], dtype=np.int64)]
+    weight = np.array([len(m) for m in members], dtype=float)
+    n_sets, n_rows = len(sets), merged.shape[0]
+    cover = sp.hstack([merged, sp.identity(n_rows, format='csr')]).tocsr()
+    limit = sp.csr_matrix(np.concatenate([np.zeros(n_sets), weight])[None, :])
+    cost = np.concatenate([np.ones(n_sets), weight * 1e-6])
+    result = linprog(cost, A_ub=sp.vstack([-cover, limit]).tocsr(),
+                     b_ub=np.concatenate([-np.ones(n_rows), [float(budget)]]),
+                     bounds=(0, 1), method='highs')
+    y = np.zeros(required.size)
+    if result.x is None:
+        return y
+    for value, rows in zip(result.x[n_sets:], members):
+        y[rows] = value
+    return y
 
 
 def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,

@@ -35,7 +35,8 @@ from scipy.sparse import csgraph
 from landmark_db.decomposition.overlap import reduce_visibility
 from landmark_db.world import WorldInstance
 
-__all__ = ['CoverState', 'ZeroProblem', 'split_components', 'zero_problem']
+__all__ = ['CoverState', 'ZeroProblem', 'component_of', 'induced_subgraph', 'split_components',
+           'zero_problem']
 
 
 @dataclass(eq=False)
@@ -65,6 +66,7 @@ class ZeroProblem:
     rng: np.random.Generator
     pose_priority: np.ndarray
     feature_priority: np.ndarray
+    _scratch: np.ndarray | None = None
 
     @property
     def n_poses(self) -> int:
@@ -101,6 +103,16 @@ class ZeroProblem:
         cols = csr.indices[np.arange(total) + offsets]
         return np.bincount(cols, minlength=self.n_features)
 
+    def keep_seeing(self, poses: np.ndarray, col: int) -> np.ndarray:
+        """Return the poses of ``poses`` whose (reduced) visibility set holds ``col``."""
+        if self._scratch is None:
+            self._scratch = np.zeros(self.n_poses, dtype=bool)
+        seen = self.column_poses(col)
+        self._scratch[seen] = True
+        kept = poses[self._scratch[poses]]
+        self._scratch[seen] = False
+        return kept
+
     def poses_seeing_all(self, cols: np.ndarray) -> np.ndarray:
         """Return the sorted poses v with every column of ``cols`` in F~_v."""
         sizes = [self.column_poses(int(c)).size for c in cols]
@@ -109,8 +121,7 @@ class ZeroProblem:
         for j in order[1:]:
             if poses.size == 0:
                 break
-            other = self.column_poses(int(cols[j]))
-            poses = poses[np.isin(poses, other, assume_unique=True)]
+            poses = self.keep_seeing(poses, int(cols[j]))
         return poses
 
     def best_feature(self, scores: np.ndarray, allowed: np.ndarray | None = None) -> int:
@@ -163,6 +174,24 @@ def zero_problem(world: WorldInstance, k: int, rho: int, sigma: int,
     )
 
 
+def induced_subgraph(adjacency: sp.csr_matrix, poses: np.ndarray) -> sp.csr_matrix:
+    """Return the adjacency (float64 CSR) of the subgraph induced by sorted ``poses``."""
+    n = adjacency.shape[0]
+    local = np.full(n, -1, dtype=np.int32)
+    local[poses] = np.arange(poses.size, dtype=np.int32)
+    starts, stops = adjacency.indptr[poses], adjacency.indptr[poses + 1]
+    lengths = stops - starts
+    total = int(lengths.sum())
+    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    targets = local[adjacency.indices[np.arange(total) + offsets]]
+    keep = targets >= 0
+    sources = np.repeat(np.arange(poses.size), lengths)
+    kept_per_row = np.bincount(sources[keep], minlength=poses.size)
+    indptr = np.concatenate([[0], np.cumsum(kept_per_row)]).astype(np.int32)
+    return sp.csr_matrix((np.ones(int(indptr[-1])), targets[keep], indptr),
+                         shape=(poses.size, poses.size))
+
+
 def split_components(adjacency: sp.csr_matrix, poses: np.ndarray) -> list[np.ndarray]:
     """Split a pose set into the connected components of its induced subgraph.
 
@@ -175,8 +204,8 @@ def split_components(adjacency: sp.csr_matrix, poses: np.ndarray) -> list[np.nda
     """
     if poses.size <= 1:
         return [poses] if poses.size else []
-    sub = adjacency[poses][:, poses]
-    n_comp, labels = csgraph.connected_components(sub, directed=False)
+    n_comp, labels = csgraph.connected_components(induced_subgraph(adjacency, poses),
+                                                  directed=False)
     if n_comp == 1:
         return [poses]
     order = np.argsort(labels, kind='stable')
@@ -184,6 +213,14 @@ def split_components(adjacency: sp.csr_matrix, poses: np.ndarray) -> list[np.nda
     pieces = [poses[np.sort(chunk)] for chunk in np.split(order, bounds)]
     pieces.sort(key=lambda piece: -piece.size)
     return pieces
+
+
+def component_of(adjacency: sp.csr_matrix, poses: np.ndarray, seed: int) -> np.ndarray:
+    """Return the connected component of ``seed`` in the subgraph induced by ``poses``."""
+    sub = induced_subgraph(adjacency, poses)
+    start = int(np.searchsorted(poses, seed))
+    order = csgraph.breadth_first_order(sub, start, directed=False, return_predecessors=False)
+    return poses[np.sort(order)]
 
 
 @dataclass(eq=False)

@@ -75,7 +75,7 @@ def choose_landmark(problem: ZeroProblem, region: np.ndarray, first_scores: np.n
         if col < 0:
             break
         chosen.append(col)
-        region = region[np.isin(region, problem.column_poses(col), assume_unique=True)]
+        region = problem.keep_seeing(region, col)
     return np.asarray(chosen, dtype=np.int64)
 
 
