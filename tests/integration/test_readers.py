@@ -20,13 +20,14 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
+from visibility_builder.bag_info import bag_paths
 from visibility_builder.bag_io import TYPESTORE, BagWriter, default_qos, open_bag
 
 pytestmark = pytest.mark.integration
 
 T = TYPESTORE.types
 REPO = Path(__file__).resolve().parents[2]
-SAMPLE_BAGS = sorted(p for p in (REPO / 'bags').glob('*') if p.is_dir() and any(p.glob('*.mcap')))
+SAMPLE_BAGS = bag_paths(REPO / 'bags')  # every sample bag that exists
 
 
 def header(stamp_ns: int, frame: str) -> object:
