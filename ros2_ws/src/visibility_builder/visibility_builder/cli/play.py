@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
                 if not player.wait_for_subscribers(executor):
                     raise VisibilityBuilderError(
                         f'no subscriber on {", ".join(player.unmatched_topics())} within '
-                        f'{options.wait_timeout_s:g} s')
+                        f'{options.wait_timeout_s or 0:g} s')
                 print('all publishers matched', flush=True)
             print(f'playing {args.bag}: {", ".join(player.publishers)}', flush=True)
             stats = player.play()
