@@ -256,6 +256,9 @@ def test_bad_options(tmp_path: Path, start_process) -> None:
     code, output = run_vbn(start_process, 'record', '--topics', '/x', '--out',
                            str(tmp_path / 'bag'))
     assert_one_line_error(code, output, 'record', 'exists already')
+    code, output = run_vbn(start_process, 'play', str(tmp_path / 'bag'), '--topics', '/odom',
+                           '--wait-for-subscribers', '--wait-timeout', '1')
+    assert_one_line_error(code, output, 'play', 'no subscriber on /odom within 1 s')
 
 
 # -- play options, in process ----------------------------------------------------------
