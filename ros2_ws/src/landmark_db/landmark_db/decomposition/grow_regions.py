@@ -21,6 +21,8 @@ Implementation notes and departures:
 """
 from __future__ import annotations
 
+import heapq
+
 import numpy as np
 
 from landmark_db.decomposition.problem import CoverState, ZeroProblem
@@ -91,38 +93,45 @@ def _grow(problem: ZeroProblem, seed: int, unassigned: np.ndarray,
     sub = problem.adjacency[cand][:, cand].tocsr()
     local_unassigned = unassigned[cand]
     priority = problem.pose_priority[cand]
-    n1 = problem.n_poses + 1
 
     start = int(local_index[seed])
     local_index[cand] = -1
     in_region = np.zeros(m, dtype=bool)
-    boundary = np.zeros(m, dtype=bool)
-    score = np.zeros(m, dtype=np.int64)
+    seen = np.zeros(m, dtype=bool)  # in the region or ever on its boundary
     common = local[start].copy()
     n_common = int(common.sum())
-    in_region[start] = True
+    in_region[start] = seen[start] = True
+    # Max-heap of usable boundary poses (score >= k), keyed by (still unassigned, score,
+    # tie priority): exactly lines 6 to 11 of Figure 5.1. Scores only change when the
+    # common set shrinks; the heap is then rebuilt from the live boundary.
+    heap: list[tuple[int, int, int, int]] = []
+    live: set[int] = set()
+
+    def push(poses: np.ndarray) -> None:
+        scores = np.count_nonzero(local[poses] & common, axis=1)
+        for u, sc in zip(poses[scores >= k].tolist(), scores[scores >= k].tolist()):
+            live.add(u)
+            heapq.heappush(heap, (-int(local_unassigned[u]), -sc, -int(priority[u]), u))
 
     def extend_boundary(u: int) -> None:
         nb = sub.indices[sub.indptr[u]:sub.indptr[u + 1]]
-        nb = nb[~in_region[nb] & ~boundary[nb]]
+        nb = nb[~seen[nb]]
         if nb.size:
-            boundary[nb] = True
-            score[nb] = np.count_nonzero(local[nb] & common, axis=1)
+            seen[nb] = True
+            push(nb)
 
     extend_boundary(start)
-    while True:
-        usable = boundary & (score >= k)
-        if not usable.any():
-            break
-        preferred = usable & local_unassigned
-        pool = np.flatnonzero(preferred if preferred.any() else usable)
-        u = int(pool[np.argmax(score[pool] * n1 + priority[pool])])
+    while heap:
+        _, neg_score, _, u = heapq.heappop(heap)
+        live.discard(u)
         in_region[u] = True
-        boundary[u] = False
-        if int(score[u]) < n_common:
+        if -neg_score < n_common:
             common &= local[u]
-            n_common = int(score[u])
-            open_boundary = np.flatnonzero(boundary)
-            score[open_boundary] = np.count_nonzero(local[open_boundary] & common, axis=1)
+            n_common = -neg_score
+            survivors = np.fromiter(live, dtype=np.int64, count=len(live))
+            heap.clear()
+            live.clear()
+            if survivors.size:
+                push(survivors)
         extend_boundary(u)
     return cand[np.flatnonzero(in_region)], seed_cols[common]
