@@ -1,0 +1,100 @@
+"""The exact 0-MORDP solver (set cover over maximal candidate regions, HiGHS MILP)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from landmark_db.decomposition import decompose, validate
+from landmark_db.decomposition.exact import candidate_regions, solve_set_cover
+from landmark_db.decomposition.problem import zero_problem
+from landmark_db.errors import LandmarkDbError
+from landmark_db.world import WorldInstance
+
+
+def figure_3_2_world(with_feature_6: bool) -> WorldInstance:
+    """Four poses A, B, C, D on a cycle; k = 2 (the example of thesis Section 3.1.5)."""
+    sets = [{1, 2}, {2, 3}, {3, 5, 6}, {1, 5, 6}]
+    if not with_feature_6:
+        sets = [s - {6} for s in sets]
+    ids = sorted(set().union(*sets))
+    visible = np.array([[f in s for f in ids] for s in sets])
+    edges = [[0, 1], [1, 2], [2, 3], [3, 0]]
+    poses = [[0, 0], [1, 0], [1, 1], [0, 1]]
+    return WorldInstance.from_visibility(poses, edges, visible, ids)
+
+
+def test_figure_3_2_fewer_regions_need_more_features():
+    with6 = decompose(figure_3_2_world(True), 'exact', k=2)
+    assert validate(figure_3_2_world(True), with6) == []
+    assert len(with6.regions) == 3
+    assert ([2, 3], [5, 6]) in [(r.poses.tolist(), r.features.tolist()) for r in with6.regions]
+    without6 = decompose(figure_3_2_world(False), 'exact', k=2)
+    assert len(without6.regions) == 4
+    used_with6 = set(np.concatenate([r.features for r in with6.regions]).tolist())
+    used_without6 = set(np.concatenate([r.features for r in without6.regions]).tolist())
+    assert len(used_with6) > len(used_without6)
+
+
+def set_cover_world() -> WorldInstance:
+    """Theorem 4.3's reduction of a set-cover instance where greedy needs 3 sets, not 2.
+
+    Elements 1..14 form two rows (1..7 and 8..14, the optimum); T1 = columns 1-4,
+    T2 = columns 5-6, T3 = column 7 of both rows. Pose 0 is the hub v*, joined to every
+    element pose; feature j is subset j plus v*.
+    """
+    rows = [set(range(1, 8)), set(range(8, 15))]
+    columns = [{1, 2, 3, 4, 8, 9, 10, 11}, {5, 6, 12, 13}, {7, 14}]
+    subsets = rows + columns
+    visible = np.zeros((15, len(subsets)), bool)
+    visible[0] = True
+    for j, subset in enumerate(subsets):
+        visible[sorted(subset), j] = True
+    angles = np.linspace(0, 2 * np.pi, 14, endpoint=False)
+    poses = np.vstack([[0, 0], np.c_[np.cos(angles), np.sin(angles)]])
+    return WorldInstance.from_visibility(poses, [[0, i] for i in range(1, 15)], visible)
+
+
+def test_exact_beats_greedy_on_a_set_cover_trap():
+    world = set_cover_world()
+    exact = decompose(world, 'exact', k=1)
+    assert validate(world, exact) == []
+    assert sorted(r.features.tolist() for r in exact.regions) == [[0], [1]]
+    for algorithm in ('B1', 'B2'):
+        greedy = decompose(world, algorithm, k=1)
+        assert validate(world, greedy) == []
+        # T1 (9 poses with the hub) first, then T2, then T3: each needed, none purged.
+        assert sorted(r.features.tolist() for r in greedy.regions) == [[2], [3], [4]]
+    assert len(decompose(world, 'best', k=1).regions) <= 3
+
+
+def test_candidates_are_the_maximal_components():
+    world = figure_3_2_world(True)
+    problem = zero_problem(world, 2, 0, 0, np.random.default_rng(0))
+    found = sorted((p.tolist(), sorted(world.feature_ids[c].tolist()))
+                   for p, c in candidate_regions(problem))
+    # {5, 6} is seen from C and D; every other pair is seen from one pose only.
+    assert ([2, 3], [5, 6]) in found
+    assert all(len(p) == 1 for p, _ in found if p != [2, 3])
+    # Landmarks with the same pose set give one candidate.
+    assert sorted(p for p, _ in found) == [[0], [1], [2], [2, 3], [3]]
+
+
+def test_refusal_when_the_candidate_count_is_too_large():
+    rng = np.random.default_rng(0)
+    visible = rng.random((10, 30)) < 0.9
+    world = WorldInstance.from_visibility(np.c_[np.arange(10), np.zeros(10)],
+                                          [[i, i + 1] for i in range(9)], visible)
+    with pytest.raises(LandmarkDbError, match='exact solver refused'):
+        decompose(world, 'exact', k=4, max_subsets=1000)
+    with pytest.raises(LandmarkDbError, match='candidate regions'):
+        decompose(world, 'exact', k=1, max_candidates=3)
+
+
+def test_set_cover_infeasible_and_budgeted():
+    sets = [np.array([0, 1]), np.array([1, 2]), np.array([3])]
+    chosen, optimal = solve_set_cover(4, np.arange(4), sets)
+    assert optimal and sorted(chosen.tolist()) == [0, 1, 2]
+    chosen, optimal = solve_set_cover(4, np.arange(4), sets, budget=1)
+    assert optimal and len(chosen) == 2
+    with pytest.raises(LandmarkDbError, match='pose 3 lies in no candidate'):
+        solve_set_cover(4, np.arange(4), sets[:2])
