@@ -133,7 +133,16 @@ def plot_k_rho_sweep(simulated: Any, path: str | Path, algorithm: str = 'B2',
     rows = []
     for i, rho in enumerate(rhos):
         for j, k in enumerate(ks):
-            d = decompose(world, algorithm, k, rho=rho, sigma=sigma, rng=seed)
+            try:
+                d = decompose(world, algorithm, k, rho=rho, sigma=sigma, rng=seed)
+            except Exception as error:  # noqa: BLE001 - reported in the row and the panel
+                message = f'{type(error).__name__}: {error}'
+                rows.append({'k': k, 'rho': rho, 'regions': 0, 'uncovered': 0,
+                             'problems': [message]})
+                axes[i, j].set_title(f'{algorithm}, k={k}, rho={rho}: FAILED', fontsize=9)
+                axes[i, j].text(0.5, 0.5, message[:80], ha='center', va='center', wrap=True,
+                                transform=axes[i, j].transAxes, fontsize=7)
+                continue
             problems = validate(world, d)
             rows.append({'k': k, 'rho': rho, 'regions': len(d.regions),
                          'uncovered': int(len(d.uncovered)), 'problems': list(problems)})
