@@ -38,6 +38,7 @@ def random_world(seed: int, coherent: bool):
 def test_every_heuristic_is_valid_on_random_worlds(seed, coherent, k, rho, sigma, algo_seed):
     world = random_world(seed, coherent)
     hood = neighbourhood_matrix(world.adjacency, rho)
+    counts = {}
     for algorithm in HEURISTICS:
         d = decompose(world, algorithm, k=k, rho=rho, sigma=sigma, rng=algo_seed)
         assert validate(world, d) == [], algorithm
@@ -52,6 +53,8 @@ def test_every_heuristic_is_valid_on_random_worlds(seed, coherent, k, rho, sigma
         for region in d.regions:
             cols = world.columns_of(region.features)
             assert world.visible_dense()[np.ix_(region.poses, cols)].all()
+        counts[algorithm] = len(d.regions)
+    assert counts['best'] <= counts['B2']
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])

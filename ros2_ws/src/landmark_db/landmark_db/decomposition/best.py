@@ -1,31 +1,38 @@
-"""The new heuristic ``best``: a pool of maximal candidate regions and an exact set cover.
+"""The new heuristic ``best``: a pool of maximal candidate regions and a set cover over it.
 
 The exact solver (:mod:`.exact`) shows that an optimum decomposition is a minimum set
 cover by maximal candidate regions, the connected components of {v : L subset of F_v}.
 Enumerating all of them is hopeless on large worlds, but a good *pool* of them plus a
 set-cover solver beats one greedy pass:
 
-1. **Reference and seed pool.** Run B.2, B.1 and C (Sections 5.3) on the same 0-MORDP
-   instance; all their regions (each already a maximal component for its landmark)
-   join the pool. The poses B.2 covers are the poses ``best`` must cover, so
-   ``best`` never leaves more poses uncovered than B.2 (with sigma = 0 this is every
-   k-coverable pose).
-2. **Seeded greedy candidates.** Repeatedly take the required pose lying in the fewest
-   pool candidates (ties: seeded priority) and grow candidates around it: for several
-   radii t (a fraction, one and two times the typical radius of B.2's regions, and
-   unbounded), restrict R to the required poses within graph distance t of the seed,
-   choose k features of the seed greedily as in B.x (each most seen in the shrinking
-   R), and add the connected component of {v : L subset of F_v} holding the seed.
-   This continues until every required pose lies in at least ``multiplicity``
-   candidates or ``max_seeds`` seeds were used.
-3. **Set cover.** Minimum set cover of the required poses by the pool with HiGHS
-   (``scipy.optimize.milp``, identical rows merged) within ``time_limit`` seconds; the
-   best incumbent is used if optimality is not proven, and B.2's own solution if
-   that were ever larger. The redundancy elimination of Section 5.4 finishes.
+1. **Reference and pool.** Run B.2, B.1 and C (Section 5.3) on the same 0-MORDP
+   instance (and B.2 with sigma = 0 when sigma > 0, so that every k-coverable pose
+   lies in some candidate); all their regions (maximal components for their
+   landmarks) start the pool. B.2's result is the reference: ``best`` may leave at
+   most as many k-coverable poses uncovered as B.2 does (none when sigma = 0).
+2. **Seeded greedy candidates.** Repeatedly take the k-coverable pose lying in the
+   fewest candidates (ties: seeded priority) and grow candidates around it: for radii
+   t of one half, one and two times the typical radius of the pool's regions, and
+   unbounded, restrict R to the k-coverable poses within graph distance t, choose k of
+   the seed's features greedily as in B.x (each the most seen in the shrinking R) and
+   add the connected component of {v : L subset of F_v} holding the seed. Seeding
+   stops when every k-coverable pose lies in ``multiplicity`` candidates or after
+   ``max_seeds`` seeds.
+3. **Partial set cover.** The fewest pool regions leaving at most B.2's number of
+   k-coverable poses uncovered. With sigma = 0 that is one exact set-cover MILP (HiGHS,
+   identical rows merged). With sigma > 0 the budget constraint makes the MILP slow
+   to find any solution, so the LP relaxation picks the poses worth giving up, a
+   set-cover MILP covers the others, and a local search (drop, two-for-one and
+   coverage-gaining swap moves) improves the result within the budget.
+4. **Merge rounds.** For every two touching chosen regions, a candidate aimed at the
+   poses only they cover is added, and the local search is repeated.
+5. The redundancy elimination of Section 5.4, then regions covering at most sigma
+   poses alone are dropped while the budget allows (the sigma rule, Section 5.5, read
+   on the final set). If the result were ever worse than B.2, B.2's is returned.
 
 Every region is a connected component seeing its k landmark features, so the output
-is valid by construction; the sigma rule acts through B.2's coverage (regions are
-never added to cover B.2's sigma holes).
+is valid by construction, and it never has more regions or more uncovered k-coverable
+poses than B.2.
 """
 from __future__ import annotations
 
@@ -102,7 +109,7 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
     regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
     _LOG.debug('best: %d candidates, %d regions (%d uncovered); B.2 %d (%d)', len(pool.poses),
                len(regions), _uncovered_count(regions, coverable), len(reference), budget)
-    if (len(regions), _uncovered_count(regions, coverable)) > (len(reference), budget):
+    if len(regions) > len(reference) or _uncovered_count(regions, coverable) > budget:
         return reference
     return regions
 
