@@ -53,6 +53,10 @@ __all__ = ['best_cover']
 
 _LOG = logging.getLogger(__name__)
 
+# The local search refines the start, so its MILP need not be solved to optimality.
+START_GAP = 0.05
+START_TIME = 1.0
+
 
 def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.0,
                multiplicity: int = 8, max_seeds: int | None = None, merge_rounds: int = 3,
@@ -132,7 +136,8 @@ def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budg
     y = relaxed_uncovered(n, required, pool.poses, budget)
     start = np.zeros(len(pool.poses), dtype=bool)
     try:
-        chosen, _ = solve_set_cover(n, required[y <= 0.5], pool.poses, time_limit)
+        chosen, _ = solve_set_cover(n, required[y <= 0.5], pool.poses,
+                                    min(time_limit, START_TIME), relative_gap=START_GAP)
         start[chosen] = True
     except LandmarkDbError:
         pass

@@ -89,7 +89,8 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
 
 def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
                     time_limit: float | None = None,
-                    budget: int | None = None) -> tuple[np.ndarray, bool]:
+                    budget: int | None = None,
+                    relative_gap: float | None = None) -> tuple[np.ndarray, bool]:
     """Solve a minimum set cover of ``required`` poses with HiGHS.
 
     Without ``budget``: min |C| such that every required pose lies in a chosen set.
@@ -103,6 +104,8 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
         sets: sorted pose index arrays (the candidate regions).
         time_limit: seconds for HiGHS, or None for no limit.
         budget: most required poses that may stay uncovered, or None for none.
+        relative_gap: stop once the incumbent is within this relative gap of the
+            bound (None: HiGHS's default, i.e. prove optimality).
 
     Returns:
         (indices of the chosen sets, whether HiGHS proved the choice optimal).
@@ -156,6 +159,8 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
     options = {'disp': False}
     if time_limit is not None:
         options['time_limit'] = float(time_limit)
+    if relative_gap is not None:
+        options['mip_rel_gap'] = float(relative_gap)
     result = milp(c=cost, constraints=constraints, integrality=np.ones(cost.size),
                   bounds=Bounds(0, 1), options=options)
     if result.x is None:
