@@ -204,7 +204,7 @@ def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray]
     cost = np.concatenate([np.ones(n_sets), weight * 1e-6])
     result = linprog(cost, A_ub=sp.vstack([-cover, limit]).tocsr(),
                      b_ub=np.concatenate([-np.ones(n_rows), [float(budget)]]),
-                     bounds=(0, 1), method='highs')
+                     bounds=(0, 1), method='highs-ipm')
     y = np.zeros(required.size)
     if result.x is None:
         return y
