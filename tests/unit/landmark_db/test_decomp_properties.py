@@ -68,3 +68,55 @@ def test_exact_is_valid_and_never_beaten(seed, coherent, k, rho):
     for algorithm in HEURISTICS:
         d = decompose(world, algorithm, k=k, rho=rho, sigma=0)
         assert len(optimum.regions) <= len(d.regions), algorithm
+
+
+def brute_neighbourhoods(world, rho):
+    from scipy.sparse.csgraph import shortest_path
+    if world.n_poses == 0:
+        return np.zeros((0, 0), bool)
+    distance = shortest_path(world.adjacency.astype(float), unweighted=True, directed=False)
+    return distance <= rho
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), coherent=st.booleans(), rho=st.integers(0, 3))
+def test_rho_reduction_matches_brute_force(seed, coherent, rho):
+    from landmark_db.decomposition.overlap import reduce_visibility
+    world = random_world(seed, coherent)
+    hood = brute_neighbourhoods(world, rho)
+    np.testing.assert_array_equal(neighbourhood_matrix(world.adjacency, rho).toarray() > 0,
+                                  hood)
+    dense = world.visible_dense()
+    expected = np.array([dense[hood[v]].all(axis=0) for v in range(world.n_poses)]
+                        ).reshape(dense.shape)
+    np.testing.assert_array_equal(
+        reduce_visibility(world.adjacency, world.visible, rho).toarray(), expected)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), coherent=st.booleans(), k=st.integers(1, 4))
+def test_algorithm_c_radius_matches_its_definition(seed, coherent, k):
+    from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_radius
+    from landmark_db.decomposition.problem import zero_problem
+    world = random_world(seed, coherent)
+    problem = zero_problem(world, k, 0, 0, np.random.default_rng(0))
+    coverable = problem.coverable
+    dense = world.visible_dense()
+
+    def passes(r):
+        hood = brute_neighbourhoods(world, r)
+        good = 0
+        for u in np.flatnonzero(coverable):
+            members = hood[u] & coverable
+            good += dense[members].all(axis=0).sum() >= k
+        return 2 * good >= coverable.sum()
+
+    radius = neighbourhood_radius(problem)
+    if coverable.any():
+        assert passes(radius)
+        # Either the next radius fails, or the sets reached a fixed point (so every
+        # larger radius passes too).
+        if passes(radius + 1):
+            assert all(passes(r) for r in range(radius + 2, radius + 5))
+    else:
+        assert radius == 0
