@@ -221,3 +221,20 @@ def test_decomposition_json_round_trip(tmp_path):
     path.write_text(json.dumps({**data, 'regions': [{'poses': [0, 'a'], 'features': [0]}]}))
     with pytest.raises(LandmarkDbError, match='regions\\[0\\].poses'):
         load_decomposition(path)
+
+
+def test_b2_purges_a_region_the_later_ones_make_redundant():
+    # Hub pose 0 joined to poses 1..6; features: S1 = {1,2,3}, S2 = {4,5,6},
+    # S3 = {1,2,4,5} (each plus the hub). B.x takes S3 first (5 poses), then S1 and S2;
+    # after S2 the purge drops S3, which no longer covers any pose alone.
+    subsets = [{1, 2, 3}, {4, 5, 6}, {1, 2, 4, 5}]
+    visible = np.zeros((7, 3), bool)
+    visible[0] = True
+    for j, subset in enumerate(subsets):
+        visible[sorted(subset), j] = True
+    from landmark_db.world import WorldInstance
+    world = WorldInstance.from_visibility(np.random.default_rng(0).random((7, 2)),
+                                          [[0, i] for i in range(1, 7)], visible)
+    b2 = decompose(world, 'B2', k=1)
+    assert validate(world, b2) == []
+    assert sorted(r.features.tolist() for r in b2.regions) == [[0], [1]]
