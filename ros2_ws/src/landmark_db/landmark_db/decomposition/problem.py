@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from landmark_db.decomposition.coverable import coverable_poses
 from landmark_db.decomposition.overlap import reduce_visibility
 from landmark_db.world import WorldInstance
 
@@ -165,7 +166,7 @@ def zero_problem(world: WorldInstance, k: int, rho: int, sigma: int,
         visible=visible,
         visible_csc=world.visible_csc if rho == 0 else sp.csc_matrix(visible),
         counts=counts,
-        coverable=counts >= k,
+        coverable=coverable_poses(visible, k),
         k=int(k),
         sigma=int(sigma),
         rng=rng,
