@@ -4,6 +4,7 @@ from __future__ import annotations
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 import numpy as np
+import pytest
 
 from landmark_db.decomposition import ALGORITHMS, decompose, validate
 from landmark_db.decomposition.overlap import covered_poses, neighbourhood_matrix
@@ -32,7 +33,7 @@ def random_world(seed: int, coherent: bool):
     return grid_world(nx, ny, 0.5, visible, free=free, feature_ids=ids)
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), coherent=st.booleans(), k=st.integers(1, 4),
        rho=st.integers(0, 2), sigma=st.integers(0, 3), algo_seed=st.integers(0, 1000))
 def test_every_heuristic_is_valid_on_random_worlds(seed, coherent, k, rho, sigma, algo_seed):
@@ -57,7 +58,7 @@ def test_every_heuristic_is_valid_on_random_worlds(seed, coherent, k, rho, sigma
     assert counts['best'] <= counts['B2']
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=80, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.integers(0, 2**32 - 1), coherent=st.booleans(), k=st.integers(1, 3),
        rho=st.integers(0, 1))
 def test_exact_is_valid_and_never_beaten(seed, coherent, k, rho):
@@ -120,3 +121,32 @@ def test_algorithm_c_radius_matches_its_definition(seed, coherent, k):
             assert all(passes(r) for r in range(radius + 2, radius + 5))
     else:
         assert radius == 0
+
+
+def disc_world(seed: int, size: int = 24, n_features: int = 60):
+    """A larger grid world with disc-shaped visibility areas and a few holes."""
+    rng = np.random.default_rng(seed)
+    free = rng.random((size, size)) > 0.08
+    centres = rng.uniform(0, size, size=(n_features, 2))
+    radius = rng.uniform(3.0, 9.0, size=n_features)
+    gx, gy = np.meshgrid(np.arange(size), np.arange(size))
+    cells = np.column_stack([gx.ravel(), gy.ravel()])
+    visible = np.linalg.norm(cells[:, None, :] - centres[None], axis=2) < radius[None]
+    visible &= rng.random(visible.shape) > 0.02
+    return grid_world(size, size, 0.5, visible, free=free)
+
+
+@pytest.mark.parametrize('seed', range(4))
+def test_all_algorithms_on_larger_coherent_worlds(seed):
+    world = disc_world(seed)
+    k, rho, sigma = 3, 1, 4
+    counts = {}
+    for algorithm in HEURISTICS:
+        d = decompose(world, algorithm, k=k, rho=rho, sigma=sigma, rng=seed)
+        assert validate(world, d) == [], algorithm
+        counts[algorithm] = (len(d.regions), d.uncovered.size)
+    assert counts['best'][0] <= counts['B2'][0]
+    complete = {a: decompose(world, a, k=k, rho=rho, sigma=0, rng=seed) for a in ('B2', 'best')}
+    for d in complete.values():
+        assert validate(world, d) == [] and d.uncovered.size == 0
+    assert len(complete['best'].regions) <= len(complete['B2'].regions)
