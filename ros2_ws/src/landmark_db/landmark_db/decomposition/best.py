@@ -41,6 +41,7 @@ import logging
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse import csgraph
 
 from landmark_db.decomposition.exact import relaxed_uncovered, solve_set_cover
 from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
@@ -53,9 +54,11 @@ __all__ = ['best_cover']
 
 _LOG = logging.getLogger(__name__)
 
-# The local search refines the start, so its MILP need not be solved to optimality.
+# The local search refines the start, so its MILP need not be solved to optimality; a
+# node limit (not a time limit) keeps results reproducible on any machine.
 START_GAP = 0.05
-START_TIME = 1.0
+START_NODES = 100
+COVER_NODES = 2000  # the complete cover (sigma = 0): usually solved at the root
 
 
 def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.0,
@@ -131,14 +134,16 @@ def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budg
     """
     n = problem.n_poses
     if budget == 0:
-        return solve_set_cover(n, required, pool.poses, time_limit)[0]
+        return solve_set_cover(n, required, pool.poses, time_limit, node_limit=COVER_NODES)[0]
     matrix, weight = _merged_rows(n, required, pool.poses)
-    y = relaxed_uncovered(n, required, pool.poses, budget)
+    y, x = relaxed_uncovered(n, required, pool.poses, budget)
     start = np.zeros(len(pool.poses), dtype=bool)
+    # Start: cover the poses the LP keeps, with the LP's support (and B.2's regions).
+    support = np.union1d(np.flatnonzero(x > 1e-6), pool.reference).astype(np.int64)
     try:
-        chosen, _ = solve_set_cover(n, required[y <= 0.5], pool.poses,
-                                    min(time_limit, START_TIME), relative_gap=START_GAP)
-        start[chosen] = True
+        chosen, _ = solve_set_cover(n, required[y <= 0.5], [pool.poses[i] for i in support],
+                                    time_limit, relative_gap=START_GAP, node_limit=START_NODES)
+        start[support[chosen]] = True
     except LandmarkDbError:
         pass
     if not start.any() or _uncovered_weight(matrix, weight, start) > budget:
@@ -380,10 +385,13 @@ def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
                      everywhere_counts: np.ndarray, cache: _ComponentCache,
                      radii: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Return candidate regions around ``seed``, one per radius plus an unbounded one."""
-    layers = _bfs_layers(problem, seed, max(radii))
+    distance = csgraph.dijkstra(problem.adjacency, indices=seed, unweighted=True,
+                                limit=max(radii) + 0.5)
+    near = np.flatnonzero(np.isfinite(distance))
+    near_distance = distance[near]
     allowed = problem.row_features(seed)
     out = []
-    balls: list[np.ndarray | None] = [np.concatenate(layers[:t + 1]) for t in radii]
+    balls: list[np.ndarray | None] = [near[near_distance <= t] for t in radii]
     balls.append(None)  # unbounded: every k-coverable pose
     for ball in balls:
         region = None if ball is None else ball[coverable[ball]]
@@ -425,25 +433,3 @@ class _ComponentCache:
             if at < piece.size and piece[at] == seed:
                 return piece
         raise AssertionError('seed does not see its landmark')
-
-
-def _bfs_layers(problem: ZeroProblem, seed: int, depth: int) -> list[np.ndarray]:
-    """Return the poses at graph distance 0, 1, ..., depth from ``seed``."""
-    adjacency = problem.adjacency
-    visited = np.zeros(problem.n_poses, dtype=bool)
-    visited[seed] = True
-    frontier = np.array([seed], dtype=np.int64)
-    layers = [frontier]
-    for _ in range(depth):
-        starts, stops = adjacency.indptr[frontier], adjacency.indptr[frontier + 1]
-        lengths = stops - starts
-        if lengths.sum() == 0:
-            layers.append(np.zeros(0, dtype=np.int64))
-            continue
-        offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
-        nb = np.unique(adjacency.indices[np.arange(int(lengths.sum())) + offsets])
-        nb = nb[~visited[nb]]
-        visited[nb] = True
-        frontier = nb.astype(np.int64)
-        layers.append(frontier)
-    return layers

@@ -90,7 +90,8 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
 def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
                     time_limit: float | None = None,
                     budget: int | None = None,
-                    relative_gap: float | None = None) -> tuple[np.ndarray, bool]:
+                    relative_gap: float | None = None,
+                    node_limit: int | None = None) -> tuple[np.ndarray, bool]:
     """Solve a minimum set cover of ``required`` poses with HiGHS.
 
     Without ``budget``: min |C| such that every required pose lies in a chosen set.
@@ -106,6 +107,8 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
         budget: most required poses that may stay uncovered, or None for none.
         relative_gap: stop once the incumbent is within this relative gap of the
             bound (None: HiGHS's default, i.e. prove optimality).
+        node_limit: most branch-and-bound nodes; unlike a time limit it keeps the
+            result independent of the machine's speed.
 
     Returns:
         (indices of the chosen sets, whether HiGHS proved the choice optimal).
@@ -161,6 +164,8 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
         options['time_limit'] = float(time_limit)
     if relative_gap is not None:
         options['mip_rel_gap'] = float(relative_gap)
+    if node_limit is not None:
+        options['node_limit'] = int(node_limit)
     result = milp(c=cost, constraints=constraints, integrality=np.ones(cost.size),
                   bounds=Bounds(0, 1), options=options)
     if result.x is None:
@@ -170,17 +175,18 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
 
 
 def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
-                      budget: int) -> np.ndarray:
-    """Solve the LP relaxation of the budgeted partial cover; return y per required pose.
+                      budget: int) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the LP relaxation of the budgeted partial cover.
 
     min sum x_j s.t. sum_{j: v in S_j} x_j + y_v >= 1, sum y_v <= budget, 0 <= x, y <= 1.
     ``y_v`` near 1 marks poses the relaxation prefers to leave uncovered.
 
     Returns:
-        ``(len(required),)`` float y values (0 when the LP fails).
+        ``(len(required),)`` y values and ``(len(sets),)`` x values (all 0 when the
+        LP fails).
     """
     if required.size == 0 or not sets:
-        return np.ones(required.size)
+        return np.ones(required.size), np.zeros(len(sets))
     sizes = np.array([s.size for s in sets], dtype=np.int64)
     row_index = np.full(n_poses, -1, dtype=np.int64)
     row_index[required] = np.arange(required.size)
@@ -207,10 +213,10 @@ def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray]
                      bounds=(0, 1), method='highs-ipm')
     y = np.zeros(required.size)
     if result.x is None:
-        return y
+        return y, np.zeros(n_sets)
     for value, rows in zip(result.x[n_sets:], members):
         y[rows] = value
-    return y
+    return y, result.x[:n_sets]
 
 
 def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,
