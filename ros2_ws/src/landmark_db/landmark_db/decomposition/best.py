@@ -127,10 +127,11 @@ def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budg
 
     With budget 0 this is one exact set-cover MILP. Otherwise the budgeted MILP is
     hard for HiGHS, so: the LP relaxation marks the poses worth giving up (relaxed
-    "uncovered" value y > 1/2), the rest are covered exactly by a MILP, and a local
-    search on the budgeted problem improves that start (and B.2's own solution):
-    drop a region while the budget allows, replace two regions by one candidate,
-    or swap one region for a candidate that covers more (creating slack for drops).
+    "uncovered" value y > 1/2), the rest are covered by a MILP over the LP's support,
+    and a local search on the budgeted problem improves that start (or B.2's own
+    solution, if the start leaves too much uncovered): drop a region while the budget
+    allows, replace two regions by one candidate, or swap one region for a candidate
+    that covers more (creating slack for drops).
     """
     n = problem.n_poses
     if budget == 0:
