@@ -145,6 +145,10 @@ def test_all_algorithms_on_larger_coherent_worlds(seed):
         d = decompose(world, algorithm, k=k, rho=rho, sigma=sigma, rng=seed)
         assert validate(world, d) == [], algorithm
         counts[algorithm] = (len(d.regions), d.uncovered.size)
+        if algorithm == 'best':  # LP, MILP and local search: still reproducible
+            again = decompose(world, algorithm, k=k, rho=rho, sigma=sigma, rng=seed)
+            assert [r.poses.tolist() for r in again.regions] == \
+                [r.poses.tolist() for r in d.regions]
     assert counts['best'][0] <= counts['B2'][0]
     complete = {a: decompose(world, a, k=k, rho=rho, sigma=0, rng=seed) for a in ('B2', 'best')}
     for d in complete.values():
