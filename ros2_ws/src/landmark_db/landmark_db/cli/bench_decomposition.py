@@ -180,7 +180,10 @@ def run(args: argparse.Namespace) -> int:
     from landmark_db.simulator.settings import get_setting, small_setting
     from landmark_db.simulator.simulate import simulate_world
 
-    sweep_world = simulate_world(small_setting(get_setting(settings[0])), config.seed)
+    # Type 2 features (setting 2) leave enough common features for k up to 10 on a
+    # small world; Type 1 worlds become mostly uncovered at k >= 6 with rho = 1.
+    sweep_setting = 2 if 2 in settings else settings[0]
+    sweep_world = simulate_world(small_setting(get_setting(sweep_setting)), config.seed)
     _, sweep = plot_k_rho_sweep(sweep_world, out / 'decomposition_k_rho_sweep.png',
                                 seed=config.seed)
     sweep_problems = [row for row in sweep if row['problems']]
