@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['BenchConfig', 'RunRecord', 'WorldOutcome', 'decomposition_rng', 'run_benchmark',
-           'run_world']
+__all__ = ['BenchConfig', 'RunRecord', 'WorldOutcome', 'decomposition_rng', 'records_as_dicts',
+           'run_benchmark', 'run_world']
 
 _LOG = logging.getLogger(__name__)
 
