@@ -12,8 +12,8 @@ set-cover solver beats one greedy pass:
    most as many k-coverable poses uncovered as B.2 does (none when sigma = 0).
 2. **Seeded greedy candidates.** Repeatedly take the k-coverable pose lying in the
    fewest candidates (ties: seeded priority) and grow candidates around it: for radii
-   t of one half, one and two times the typical radius of the pool's regions, and
-   unbounded, restrict R to the k-coverable poses within graph distance t, choose k of
+   t of one half, one and two times the typical radius of the pool's regions,
+   restrict R to the k-coverable poses within graph distance t, choose k of
    the seed's features greedily as in B.x (each the most seen in the shrinking R) and
    add the connected component of {v : L subset of F_v} holding the seed. Seeding
    stops when every k-coverable pose lies in ``multiplicity`` candidates or after
@@ -304,7 +304,6 @@ def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, multiplicity: int,
     radii = sorted({max(1, typical // 2), typical, 2 * typical})
     seeds_left = max_seeds if max_seeds is not None else max(1, n // 4)
     seeded = np.zeros(n, dtype=bool)
-    everywhere_counts = problem.feature_counts(np.flatnonzero(coverable))
     cache = _ComponentCache(problem)
     while seeds_left > 0:
         counts = pool.counts
@@ -316,8 +315,7 @@ def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, multiplicity: int,
         seed = int(candidates[np.argmin(keys)])
         seeded[seed] = True
         seeds_left -= 1
-        for region in _grow_candidates(problem, seed, coverable, everywhere_counts, cache,
-                                       radii):
+        for region in _grow_candidates(problem, seed, coverable, cache, radii):
             pool.add(*region)
 
 
@@ -383,34 +381,44 @@ class _Pool:
 
 
 def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
-                     everywhere_counts: np.ndarray, cache: _ComponentCache,
+                     cache: _ComponentCache,
                      radii: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Return candidate regions around ``seed``, one per radius plus an unbounded one."""
+    """Return candidate regions around ``seed``, one per ball radius."""
     distance = csgraph.dijkstra(problem.adjacency, indices=seed, unweighted=True,
                                 limit=max(radii) + 0.5)
-    near = np.flatnonzero(np.isfinite(distance))
+    near = np.flatnonzero(np.isfinite(distance) & coverable)
     near_distance = distance[near]
     allowed = problem.row_features(seed)
+    # Dense (near poses x seed features) visibility: the ball variants' greedy steps
+    # become column sums of a small boolean matrix.
+    csc = problem.visible_csc
+    starts, stops = csc.indptr[allowed], csc.indptr[allowed + 1]
+    lengths = stops - starts
+    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    rows = csc.indices[np.arange(int(lengths.sum())) + offsets]
+    cols = np.repeat(np.arange(allowed.size), lengths)
+    local_index = np.full(problem.n_poses, -1, dtype=np.int64)
+    local_index[near] = np.arange(near.size)
+    keep = local_index[rows] >= 0
+    local = np.zeros((near.size, allowed.size), dtype=bool)
+    local[local_index[rows[keep]], cols[keep]] = True
+    keys_base = problem.feature_priority[allowed]
     out = []
-    balls: list[np.ndarray | None] = [near[near_distance <= t] for t in radii]
-    balls.append(None)  # unbounded: every k-coverable pose
-    for ball in balls:
-        region = None if ball is None else ball[coverable[ball]]
+    for t in radii:
+        members = near_distance <= t
         chosen: list[int] = []
         for _ in range(problem.k):
-            scores = everywhere_counts.copy() if region is None else \
-                problem.feature_counts(region)
+            scores = local[members].sum(axis=0)
             scores[chosen] = 0
-            col = problem.best_feature(scores, allowed)
-            if col < 0:
+            if not scores.any():
                 break
-            chosen.append(col)
-            region = problem.column_poses(col)[coverable[problem.column_poses(col)]] \
-                if region is None else problem.keep_seeing(region, col)
-        if len(chosen) < problem.k:
-            continue
-        landmark = np.sort(np.asarray(chosen, dtype=np.int64))
-        out.append((cache.component(landmark, seed), landmark))
+            keys = np.where(scores > 0, scores * (problem.n_features + 1) + keys_base, -1)
+            j = int(np.argmax(keys))
+            chosen.append(j)
+            members &= local[:, j]
+        if len(chosen) == problem.k:
+            landmark = np.sort(allowed[chosen])
+            out.append((cache.component(landmark, seed), landmark))
     return out
 
 
