@@ -62,3 +62,4 @@ def test_missing_file_is_one_line_and_exit_2(fake_command, capsys):
     assert cli_main.main(['explode', '--kind', 'os']) == 2
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and 'missing.json' in err and 'Traceback' not in err
+

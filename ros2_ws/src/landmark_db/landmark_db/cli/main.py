@@ -12,6 +12,7 @@ import argparse
 from collections.abc import Sequence
 from importlib import metadata
 import logging
+import os
 import sys
 
 from landmark_db import __version__
@@ -51,7 +52,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``vbn`` and return its exit code.
 
     A ``VbnError`` or an ``OSError`` (missing file, permission) becomes one line on
-    stderr and exit code 2; Ctrl-C exits with 130.
+    stderr and exit code 2; a closed output pipe ends quietly; Ctrl-C exits with 130.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -67,6 +68,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except VbnError as error:
         print(f'vbn {args.command}: error: {error}', file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # The reader of our output went away (``vbn bag-info BAG | head``): stop quietly.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as error:
         print(f'vbn {args.command}: error: {error}', file=sys.stderr)
         return 2
