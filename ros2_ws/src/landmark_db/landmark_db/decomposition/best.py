@@ -5,7 +5,7 @@ cover by maximal candidate regions, the connected components of {v : L subset of
 Enumerating all of them is hopeless on large worlds, but a good *pool* of them plus a
 set-cover solver beats one greedy pass:
 
-1. **Reference and pool.** Run B.2, B.1 and C (Section 5.3) on the same 0-MORDP
+1. **Reference and pool.** Run B.2 and B.1 (Section 5.3) on the same 0-MORDP
    instance (and B.2 with sigma = 0 when sigma > 0, so that every k-coverable pose
    lies in some candidate); all their regions (maximal components for their
    landmarks) start the pool. B.2's result is the reference: ``best`` may leave at
@@ -44,8 +44,7 @@ import scipy.sparse as sp
 from scipy.sparse import csgraph
 
 from landmark_db.decomposition.exact import relaxed_uncovered, solve_set_cover
-from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
-from landmark_db.decomposition.problem import ZeroProblem, component_of, split_components
+from landmark_db.decomposition.problem import ZeroProblem, split_components
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.shrink_regions import shrink_regions
 from landmark_db.errors import LandmarkDbError
@@ -59,16 +58,21 @@ _LOG = logging.getLogger(__name__)
 START_GAP = 0.05
 START_NODES = 100
 COVER_NODES = 2000  # the complete cover (sigma = 0): usually solved at the root
+# The budgeted LP relaxation is degenerate; HiGHS's dual simplex reaches an optimal
+# vertex in about two thirds of the interior-point method's time (with crossover).
+LP_METHOD = 'highs-ds'
 
 
 def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.0,
-               multiplicity: int = 8, max_seeds: int | None = None, merge_rounds: int = 3,
+               multiplicity: int = 5, max_seeds: int | None = None, merge_rounds: int = 3,
                ) -> list[tuple[np.ndarray, np.ndarray]]:
     """Run the ``best`` heuristic on a 0-MORDP instance.
 
     Args:
         problem: the reduced instance.
-        alpha: algorithm C's alpha (C's regions seed the pool).
+        alpha: algorithm C's alpha; accepted for a uniform interface and unused
+            (C's regions no longer seed the pool: the seeded candidates cover what
+            they added, and C cost a fifth of the run time).
         time_limit: seconds for each set-cover MILP.
         multiplicity: stop seeding once every k-coverable pose lies in this many
             candidates.
@@ -84,12 +88,13 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
     budget = _uncovered_count(reference, coverable)
     pool = _Pool(n)
     pool.reference = [pool.add(*region) for region in reference]
-    extra = shrink_regions(problem, 'B1') + neighbourhood_seeds(problem, alpha)
+    extra = shrink_regions(problem, 'B1')
     if problem.sigma:
         extra += shrink_regions(replace(problem, sigma=0), 'B2')
     for region in extra:
         pool.add(*region)
-    _add_seeded_candidates(problem, pool, multiplicity, max_seeds)
+    cache = _ComponentCache(problem)
+    _add_seeded_candidates(problem, pool, cache, multiplicity, max_seeds)
 
     required = np.flatnonzero(coverable)
     try:
@@ -97,7 +102,7 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
         for _ in range(merge_rounds):
             if chosen is None:
                 break
-            added = _add_merge_candidates(problem, pool, chosen)
+            added = _add_merge_candidates(problem, pool, cache, chosen)
             if not added:
                 break
             matrix, weight = _merged_rows(n, required, pool.poses)
@@ -137,7 +142,7 @@ def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budg
     if budget == 0:
         return solve_set_cover(n, required, pool.poses, time_limit, node_limit=COVER_NODES)[0]
     matrix, weight = _merged_rows(n, required, pool.poses)
-    y, x = relaxed_uncovered(n, required, pool.poses, budget)
+    y, x = relaxed_uncovered(n, required, pool.poses, budget, method=LP_METHOD)
     start = np.zeros(len(pool.poses), dtype=bool)
     # Start: cover the poses the LP keeps, with the LP's support (and B.2's regions).
     support = np.union1d(np.flatnonzero(x > 1e-6), pool.reference).astype(np.int64)
@@ -153,7 +158,8 @@ def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budg
     return np.flatnonzero(_local_search(matrix, weight, start, budget))
 
 
-def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, chosen: np.ndarray) -> int:
+def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCache,
+                          chosen: np.ndarray) -> int:
     """Add candidates aimed at replacing two neighbouring chosen regions by one.
 
     For every pair of chosen regions that touch (share or neighbour a pose), the poses
@@ -201,9 +207,8 @@ def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, chosen: np.ndarray)
             region = problem.keep_seeing(region, col)
         if len(chosen_cols) < problem.k or region.size == 0:
             continue
-        landmark = np.asarray(chosen_cols, dtype=np.int64)
-        pool.add(component_of(problem.adjacency, problem.poses_seeing_all(landmark),
-                              int(region[0])), landmark)
+        landmark = np.sort(np.asarray(chosen_cols, dtype=np.int64))
+        pool.add(cache.component(landmark, int(region[0])), landmark)
     return len(pool.poses) - before
 
 
@@ -294,8 +299,8 @@ def _local_search(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndarray,
     return chosen
 
 
-def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, multiplicity: int,
-                           max_seeds: int | None) -> None:
+def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCache,
+                           multiplicity: int, max_seeds: int | None) -> None:
     """Grow candidates around the k-coverable poses lying in the fewest candidates."""
     n = problem.n_poses
     coverable = problem.coverable
@@ -304,7 +309,6 @@ def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, multiplicity: int,
     radii = sorted({max(1, typical // 2), typical, 2 * typical})
     seeds_left = max_seeds if max_seeds is not None else max(1, n // 4)
     seeded = np.zeros(n, dtype=bool)
-    cache = _ComponentCache(problem)
     while seeds_left > 0:
         counts = pool.counts
         open_mask = coverable & ~seeded & (counts < multiplicity)
@@ -400,22 +404,24 @@ def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
     local_index = np.full(problem.n_poses, -1, dtype=np.int64)
     local_index[near] = np.arange(near.size)
     keep = local_index[rows] >= 0
-    local = np.zeros((near.size, allowed.size), dtype=bool)
-    local[local_index[rows[keep]], cols[keep]] = True
+    # float64 0/1 entries: a (members @ local) product counts exactly, through BLAS.
+    local = np.zeros((near.size, allowed.size))
+    local[local_index[rows[keep]], cols[keep]] = 1.0
     keys_base = problem.feature_priority[allowed]
+    scale = problem.n_features + 1
     out = []
     for t in radii:
-        members = near_distance <= t
+        members = (near_distance <= t).astype(np.float64)
         chosen: list[int] = []
         for _ in range(problem.k):
-            scores = local[members].sum(axis=0)
+            scores = members @ local
             scores[chosen] = 0
             if not scores.any():
                 break
-            keys = np.where(scores > 0, scores * (problem.n_features + 1) + keys_base, -1)
+            keys = np.where(scores > 0, scores.astype(np.int64) * scale + keys_base, -1)
             j = int(np.argmax(keys))
             chosen.append(j)
-            members &= local[:, j]
+            members *= local[:, j]
         if len(chosen) == problem.k:
             landmark = np.sort(allowed[chosen])
             out.append((cache.component(landmark, seed), landmark))

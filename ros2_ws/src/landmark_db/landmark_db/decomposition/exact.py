@@ -175,7 +175,7 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
 
 
 def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
-                      budget: int) -> tuple[np.ndarray, np.ndarray]:
+                      budget: int, method: str = 'highs-ipm') -> tuple[np.ndarray, np.ndarray]:
     """Solve the LP relaxation of the budgeted partial cover.
 
     min sum x_j s.t. sum_{j: v in S_j} x_j + y_v >= 1, sum y_v <= budget, 0 <= x, y <= 1.
@@ -210,7 +210,7 @@ def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray]
     cost = np.concatenate([np.ones(n_sets), weight * 1e-6])
     result = linprog(cost, A_ub=sp.vstack([-cover, limit]).tocsr(),
                      b_ub=np.concatenate([-np.ones(n_rows), [float(budget)]]),
-                     bounds=(0, 1), method='highs-ipm')
+                     bounds=(0, 1), method=method)
     y = np.zeros(required.size)
     if result.x is None:
         return y, np.zeros(n_sets)
