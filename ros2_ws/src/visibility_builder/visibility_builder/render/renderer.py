@@ -59,7 +59,8 @@ def cast_rays(origin: np.ndarray, angles: np.ndarray, starts: np.ndarray,
     e = ends - starts  # (s, 2)
     ap = starts - np.asarray(origin, dtype=float)[None, :]  # (s, 2)
     denom = d[:, 0, None] * e[None, :, 1] - d[:, 1, None] * e[None, :, 0]
-    with np.errstate(divide='ignore', invalid='ignore'):
+    # Near-parallel rays give huge or infinite quotients; the hit mask below drops them.
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
         t = (ap[:, 0] * e[:, 1] - ap[:, 1] * e[:, 0])[None, :] / denom
         s = (ap[None, :, 0] * d[:, 1, None] - ap[None, :, 1] * d[:, 0, None]) / denom
     hit = (np.abs(denom) > 1e-12) & (t > 1e-9) & (s >= 0.0) & (s <= 1.0)
