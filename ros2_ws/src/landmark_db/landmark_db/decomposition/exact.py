@@ -175,11 +175,20 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
 
 
 def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
-                      budget: int, method: str = 'highs-ipm') -> tuple[np.ndarray, np.ndarray]:
+                      budget: int, method: str = 'highs-ipm',
+                      presolve: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Solve the LP relaxation of the budgeted partial cover.
 
     min sum x_j s.t. sum_{j: v in S_j} x_j + y_v >= 1, sum y_v <= budget, 0 <= x, y <= 1.
     ``y_v`` near 1 marks poses the relaxation prefers to leave uncovered.
+
+    Args:
+        n_poses: number of poses.
+        required: sorted poses to cover.
+        sets: sorted pose index arrays (the candidate regions).
+        budget: most required poses that may stay uncovered.
+        method: ``scipy.optimize.linprog`` HiGHS method.
+        presolve: whether HiGHS presolves the LP.
 
     Returns:
         ``(len(required),)`` y values and ``(len(sets),)`` x values (all 0 when the
@@ -210,7 +219,7 @@ def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray]
     cost = np.concatenate([np.ones(n_sets), weight * 1e-6])
     result = linprog(cost, A_ub=sp.vstack([-cover, limit]).tocsr(),
                      b_ub=np.concatenate([-np.ones(n_rows), [float(budget)]]),
-                     bounds=(0, 1), method=method)
+                     bounds=(0, 1), method=method, options={'presolve': presolve})
     y = np.zeros(required.size)
     if result.x is None:
         return y, np.zeros(n_sets)
