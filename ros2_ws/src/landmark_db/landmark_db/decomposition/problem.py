@@ -68,6 +68,7 @@ class ZeroProblem:
     pose_priority: np.ndarray
     feature_priority: np.ndarray
     _scratch: np.ndarray | None = None
+    _visible_t: sp.csr_matrix | None = None
 
     @property
     def n_poses(self) -> int:
@@ -100,6 +101,13 @@ class ZeroProblem:
         total = int(lengths.sum())
         if total == 0:
             return np.zeros(self.n_features, dtype=np.int64)
+        if 4 * total > csr.nnz:
+            # Many poses: one sparse product over all of F~ beats gathering their rows
+            # (exact: float64 sums of 0/1 values).
+            if self._visible_t is None:
+                self._visible_t = sp.csr_matrix(csr.T, dtype=np.float64)
+            weight = np.bincount(poses, minlength=self.n_poses).astype(np.float64)
+            return (self._visible_t @ weight).astype(np.int64)
         offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
         cols = csr.indices[np.arange(total) + offsets]
         return np.bincount(cols, minlength=self.n_features)
