@@ -389,7 +389,7 @@ def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
                      cache: _ComponentCache,
                      radii: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Return candidate regions around ``seed``, one per ball radius."""
-    distance = csgraph.dijkstra(problem.adjacency, indices=seed, unweighted=True,
+    distance = csgraph.dijkstra(cache.graph, indices=seed, unweighted=True,
                                 limit=max(radii) + 0.5)
     near = np.flatnonzero(np.isfinite(distance) & coverable)
     near_distance = distance[near]
@@ -435,6 +435,8 @@ class _ComponentCache:
     def __init__(self, problem: ZeroProblem) -> None:
         self.problem = problem
         self._pieces: dict[bytes, list[np.ndarray]] = {}
+        # float64 adjacency: csgraph would otherwise convert the bool matrix per call.
+        self.graph = sp.csr_matrix(problem.adjacency, dtype=np.float64)
 
     def component(self, landmark: np.ndarray, seed: int) -> np.ndarray:
         """Return the component holding ``seed`` (which must see all of ``landmark``)."""
