@@ -43,7 +43,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from landmark_db.decomposition.exact import relaxed_uncovered, solve_set_cover
+from landmark_db.decomposition.exact import (
+    cover_matrix,
+    merge_identical_rows,
+    relaxed_uncovered,
+    solve_set_cover,
+)
 from landmark_db.decomposition.problem import ZeroProblem, split_components
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.shrink_regions import shrink_regions
@@ -216,25 +221,8 @@ def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCa
 def _merged_rows(n_poses: int, required: np.ndarray,
                  sets: list[np.ndarray]) -> tuple[sp.csc_matrix, np.ndarray]:
     """Return the (merged rows x sets) cover matrix and each merged row's pose count."""
-    sizes = np.array([s.size for s in sets], dtype=np.int64)
-    row_index = np.full(n_poses, -1, dtype=np.int64)
-    row_index[required] = np.arange(required.size)
-    flat = np.concatenate(sets)
-    cols = np.repeat(np.arange(len(sets)), sizes)
-    keep = row_index[flat] >= 0
-    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
-                           shape=(required.size, len(sets)))
-    matrix.sum_duplicates()
-    matrix.sort_indices()
-    groups: dict[bytes, int] = {}
-    for r in range(matrix.shape[0]):
-        key = matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes()
-        groups[key] = groups.get(key, 0) + 1
-    first: dict[bytes, int] = {}
-    for r in range(matrix.shape[0]):
-        first.setdefault(matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes(), r)
-    merged = matrix[np.fromiter(first.values(), dtype=np.int64)]
-    weight = np.fromiter((groups[key] for key in first), dtype=float)
+    merged, members = merge_identical_rows(cover_matrix(n_poses, required, sets))
+    weight = np.array([m.size for m in members], dtype=float)
     return sp.csc_matrix(merged), weight
 
 

@@ -87,6 +87,50 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
     return list(candidates.values())
 
 
+def cover_matrix(n_poses: int, required: np.ndarray, sets: list[np.ndarray]) -> sp.csr_matrix:
+    """Return the set-cover incidence matrix of ``required`` poses by candidate ``sets``.
+
+    Args:
+        n_poses: number of poses (pose indices are below it).
+        required: sorted poses to cover; row ``r`` is pose ``required[r]``.
+        sets: pose index arrays (the candidate regions); column ``j`` is ``sets[j]``.
+
+    Returns:
+        ``(len(required), len(sets))`` CSR matrix of ones with sorted indices; poses of
+        a set that are not required are left out.
+    """
+    sizes = np.array([s.size for s in sets], dtype=np.int64)
+    row_index = np.full(n_poses, -1, dtype=np.int64)
+    row_index[required] = np.arange(required.size)
+    flat = np.concatenate(sets)
+    cols = np.repeat(np.arange(len(sets)), sizes)
+    keep = row_index[flat] >= 0
+    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
+                           shape=(required.size, len(sets)))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    return matrix
+
+
+def merge_identical_rows(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix, list[np.ndarray]]:
+    """Merge the rows of a sorted-index CSR matrix that have the same column pattern.
+
+    Poses covered by exactly the same candidates are interchangeable in a cover, so
+    the integer program needs one row per pattern, weighted by its pose count.
+
+    Returns:
+        The merged matrix (one row per pattern, in order of first occurrence) and,
+        per merged row, the indices of the original rows it stands for.
+    """
+    groups: dict[bytes, list[int]] = {}
+    for r in range(matrix.shape[0]):
+        groups.setdefault(matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes(),
+                          []).append(r)
+    members = [np.array(rows, dtype=np.int64) for rows in groups.values()]
+    first = np.array([rows[0] for rows in members], dtype=np.int64)
+    return matrix[first], members
+
+
 def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
                     time_limit: float | None = None,
                     budget: int | None = None,
@@ -123,16 +167,7 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
         if required.size > (budget or 0):
             raise LandmarkDbError('set cover infeasible: no candidate sets')
         return np.zeros(0, dtype=np.int64), True
-    sizes = np.array([s.size for s in sets], dtype=np.int64)
-    row_index = np.full(n_poses, -1, dtype=np.int64)
-    row_index[required] = np.arange(required.size)
-    flat = np.concatenate(sets)
-    cols = np.repeat(np.arange(len(sets)), sizes)
-    keep = row_index[flat] >= 0
-    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
-                           shape=(required.size, len(sets)))
-    matrix.sum_duplicates()
-    matrix.sort_indices()
+    matrix = cover_matrix(n_poses, required, sets)
     empty_rows = np.diff(matrix.indptr) == 0
     if empty_rows.any():
         n_empty = int(empty_rows.sum())
@@ -141,19 +176,13 @@ def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
             raise LandmarkDbError(f'set cover infeasible: pose {int(bad)} lies in no candidate')
         budget = None if budget is None else budget - n_empty
         matrix = matrix[np.flatnonzero(~empty_rows)]
-    # Merge poses lying in exactly the same candidates: their rows are identical.
-    signatures: dict[bytes, int] = {}
-    weights: dict[bytes, int] = {}
-    for r in range(matrix.shape[0]):
-        key = matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes()
-        signatures.setdefault(key, r)
-        weights[key] = weights.get(key, 0) + 1
-    matrix = matrix[np.fromiter(signatures.values(), dtype=np.int64)]
+    # Poses lying in exactly the same candidates have identical rows: one row each.
+    matrix, members = merge_identical_rows(matrix)
     n_sets, n_rows = len(sets), matrix.shape[0]
     cost = np.ones(n_sets)
     constraints = [LinearConstraint(matrix, lb=1, ub=np.inf)]
     if budget:
-        row_weight = np.fromiter((weights[key] for key in signatures), dtype=float)
+        row_weight = np.array([m.size for m in members], dtype=float)
         matrix = sp.hstack([matrix, sp.identity(n_rows, format='csr')]).tocsr()
         cost = np.concatenate([cost, row_weight / (row_weight.sum() + 1.0)])
         limit = sp.csr_matrix(np.concatenate([np.zeros(n_sets), row_weight])[None, :])
@@ -196,23 +225,9 @@ def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray]
     """
     if required.size == 0 or not sets:
         return np.ones(required.size), np.zeros(len(sets))
-    sizes = np.array([s.size for s in sets], dtype=np.int64)
-    row_index = np.full(n_poses, -1, dtype=np.int64)
-    row_index[required] = np.arange(required.size)
-    flat = np.concatenate(sets)
-    cols = np.repeat(np.arange(len(sets)), sizes)
-    keep = row_index[flat] >= 0
-    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
-                           shape=(required.size, len(sets)))
-    matrix.sum_duplicates()
-    matrix.sort_indices()
-    groups: dict[bytes, list[int]] = {}
-    for r in range(matrix.shape[0]):
-        groups.setdefault(matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes(),
-                          []).append(r)
-    members = list(groups.values())
-    merged = matrix[np.array([m[0] for m in members], dtype=np.int64)]
-    weight = np.array([len(m) for m in members], dtype=float)
+    matrix = cover_matrix(n_poses, required, sets)
+    merged, members = merge_identical_rows(matrix)
+    weight = np.array([m.size for m in members], dtype=float)
     n_sets, n_rows = len(sets), merged.shape[0]
     cover = sp.hstack([merged, sp.identity(n_rows, format='csr')]).tocsr()
     limit = sp.csr_matrix(np.concatenate([np.zeros(n_sets), weight])[None, :])
