@@ -28,7 +28,6 @@ half that angle of the feature's normal (the normal points into free space).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -36,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from landmark_db.errors import LandmarkDbError
+from landmark_db.jsonio import read_json_file, write_json_atomic
 
 __all__ = ['Scene', 'SceneFeatures', 'load_scene', 'points_in_polygon', 'save_scene']
 
@@ -183,26 +183,15 @@ def load_scene(path: str | Path) -> Scene:
     """Read a scene JSON file.
 
     Raises:
-        LandmarkDbError: if the file is not valid JSON or not a valid scene.
-        OSError: if the file cannot be read.
+        LandmarkDbError: if the file is missing, unreadable, not valid JSON or not a
+            valid scene.
     """
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as error:
-        raise LandmarkDbError(f'{path}: not valid JSON ({error})') from None
-    try:
-        return Scene.from_dict(data)
-    except LandmarkDbError as error:
-        raise LandmarkDbError(f'{path}: {error}') from None
+    return read_json_file(path, Scene.from_dict)
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:
     """Write a scene JSON file atomically (temporary file, then rename)."""
-    path = Path(path)
-    tmp = path.with_name(path.name + '.tmp')
-    tmp.write_text(json.dumps(scene.to_dict(), indent=1))
-    tmp.replace(path)
+    write_json_atomic(scene.to_dict(), path, indent=1)
 
 
 def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:

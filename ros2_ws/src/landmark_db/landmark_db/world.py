@@ -25,17 +25,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-import json
 import math
-import os
 from pathlib import Path
-import tempfile
 from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 
 from landmark_db.errors import LandmarkDbError
+from landmark_db.jsonio import read_json_file, write_json_atomic
 
 __all__ = [
     'WorldInstance',
@@ -337,41 +335,12 @@ def load_world(path: str | Path) -> WorldInstance:
     Raises:
         LandmarkDbError: if the file is missing, not valid JSON or not a valid world.
     """
-    try:
-        text = Path(path).read_text(encoding='utf-8')
-    except FileNotFoundError:
-        raise LandmarkDbError(f'{path}: no such file') from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise LandmarkDbError(f'{path}: cannot read ({error})') from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise LandmarkDbError(f'{path}: not valid JSON ({error})') from None
-    try:
-        return world_from_dict(data)
-    except LandmarkDbError as error:
-        raise LandmarkDbError(f'{path}: {error}') from None
+    return read_json_file(path, world_from_dict)
 
 
 def save_world(world: WorldInstance, path: str | Path) -> None:
     """Write a world as interchange JSON, atomically (temporary file, then rename)."""
     write_json_atomic(world_to_dict(world), path)
-
-
-def write_json_atomic(data: Any, path: str | Path) -> None:
-    """Write ``data`` as compact JSON to ``path`` via a temporary file and a rename."""
-    target = Path(path)
-    directory = target.parent if str(target.parent) else Path('.')
-    handle, temp_name = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp',
-                                         dir=directory)
-    try:
-        with os.fdopen(handle, 'w', encoding='utf-8') as stream:
-            json.dump(data, stream, separators=(',', ':'))
-            stream.write('\n')
-        os.replace(temp_name, target)
-    except BaseException:
-        Path(temp_name).unlink(missing_ok=True)
-        raise
 
 
 def _check_poses(raw: Any) -> np.ndarray:

@@ -11,7 +11,6 @@ Decomposition JSON (fixed; other tools depend on it)::
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -19,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from landmark_db.errors import LandmarkDbError
-from landmark_db.world import write_json_atomic
+from landmark_db.jsonio import read_json_file, write_json_atomic
 
 __all__ = ['Decomposition', 'Region', 'load_decomposition', 'save_decomposition']
 
@@ -129,20 +128,7 @@ def load_decomposition(path: str | Path) -> Decomposition:
     Raises:
         LandmarkDbError: if the file is missing, not JSON, or malformed.
     """
-    try:
-        text = Path(path).read_text(encoding='utf-8')
-    except FileNotFoundError:
-        raise LandmarkDbError(f'{path}: no such file') from None
-    except (OSError, UnicodeDecodeError) as error:
-        raise LandmarkDbError(f'{path}: cannot read ({error})') from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as error:
-        raise LandmarkDbError(f'{path}: not valid JSON ({error})') from None
-    try:
-        return Decomposition.from_dict(data)
-    except LandmarkDbError as error:
-        raise LandmarkDbError(f'{path}: {error}') from None
+    return read_json_file(path, Decomposition.from_dict)
 
 
 def save_decomposition(decomposition: Decomposition, path: str | Path) -> None:
