@@ -71,3 +71,15 @@ def test_component_cache_returns_the_seed_component():
     assert cache.component(landmark, 1).tolist() == [0, 1, 2]
     assert cache.component(landmark, 5).tolist() == [4, 5, 6]
     assert cache.component(landmark, 0).tolist() == [0, 1, 2]
+
+
+def test_gather_slices_concatenates_the_selected_columns_in_order():
+    import scipy.sparse as sp
+
+    from landmark_db.decomposition.problem import gather_slices
+
+    # 3 poses x 3 features; column 0 seen by poses 0 and 2, column 1 by none, column 2 by 1.
+    csc = sp.csc_matrix(np.array([[1, 0, 0], [0, 0, 1], [1, 0, 0]], dtype=bool))
+    entries, lengths = gather_slices(csc.indptr, csc.indices, np.array([2, 1, 0]))
+    assert entries.tolist() == [1, 0, 2]
+    assert lengths.tolist() == [1, 0, 2]

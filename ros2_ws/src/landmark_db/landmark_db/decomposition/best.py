@@ -49,7 +49,7 @@ from landmark_db.decomposition.exact import (
     relaxed_uncovered,
     solve_set_cover,
 )
-from landmark_db.decomposition.problem import ZeroProblem, split_components
+from landmark_db.decomposition.problem import ZeroProblem, gather_slices, split_components
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.shrink_regions import shrink_regions
 from landmark_db.errors import LandmarkDbError
@@ -385,10 +385,7 @@ def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
     # Dense (near poses x seed features) visibility: the ball variants' greedy steps
     # become column sums of a small boolean matrix.
     csc = problem.visible_csc
-    starts, stops = csc.indptr[allowed], csc.indptr[allowed + 1]
-    lengths = stops - starts
-    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
-    rows = csc.indices[np.arange(int(lengths.sum())) + offsets]
+    rows, lengths = gather_slices(csc.indptr, csc.indices, allowed)
     cols = np.repeat(np.arange(allowed.size), lengths)
     local_index = np.full(problem.n_poses, -1, dtype=np.int64)
     local_index[near] = np.arange(near.size)

@@ -25,7 +25,7 @@ import heapq
 
 import numpy as np
 
-from landmark_db.decomposition.problem import CoverState, ZeroProblem
+from landmark_db.decomposition.problem import CoverState, ZeroProblem, gather_slices
 from landmark_db.decomposition.redundancy import eliminate_redundant
 
 __all__ = ['grow_regions']
@@ -78,10 +78,7 @@ def _grow(problem: ZeroProblem, seed: int, unassigned: np.ndarray,
     seed_cols = problem.row_features(seed)
     csc = problem.visible_csc
     # Poses sharing >= k features with the seed, and their local feature matrix.
-    starts, stops = csc.indptr[seed_cols], csc.indptr[seed_cols + 1]
-    lengths = stops - starts
-    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
-    rows = csc.indices[np.arange(int(lengths.sum())) + offsets]
+    rows, lengths = gather_slices(csc.indptr, csc.indices, seed_cols)
     col_local = np.repeat(np.arange(seed_cols.size), lengths)
     shared = np.bincount(rows, minlength=problem.n_poses)
     cand = np.flatnonzero(shared >= k)

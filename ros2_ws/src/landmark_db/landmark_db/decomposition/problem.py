@@ -36,8 +36,8 @@ from landmark_db.decomposition.coverable import coverable_poses
 from landmark_db.decomposition.overlap import reduce_visibility
 from landmark_db.world import WorldInstance
 
-__all__ = ['CoverState', 'ZeroProblem', 'component_of', 'induced_subgraph', 'split_components',
-           'zero_problem']
+__all__ = ['CoverState', 'ZeroProblem', 'component_of', 'gather_slices', 'induced_subgraph',
+           'split_components', 'zero_problem']
 
 
 @dataclass(eq=False)
@@ -108,8 +108,7 @@ class ZeroProblem:
                 self._visible_t = sp.csr_matrix(csr.T, dtype=np.float64)
             weight = np.bincount(poses, minlength=self.n_poses).astype(np.float64)
             return (self._visible_t @ weight).astype(np.int64)
-        offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
-        cols = csr.indices[np.arange(total) + offsets]
+        cols, _ = gather_slices(csr.indptr, csr.indices, poses)
         return np.bincount(cols, minlength=self.n_features)
 
     def keep_seeing(self, poses: np.ndarray, col: int) -> np.ndarray:
@@ -183,16 +182,37 @@ def zero_problem(world: WorldInstance, k: int, rho: int, sigma: int,
     )
 
 
+def gather_slices(indptr: np.ndarray, indices: np.ndarray,
+                  selected: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenate the index slices of selected rows (CSR) or columns (CSC), vectorised.
+
+    Args:
+        indptr: the sparse matrix's ``indptr``.
+        indices: the sparse matrix's ``indices``.
+        selected: the rows (CSR) or columns (CSC) to gather, in the order wanted.
+
+    Returns:
+        ``(entries, lengths)``: the indices of every selected slice, one after the other,
+        and each slice's length (``np.repeat(np.arange(len(selected)), lengths)`` says
+        which selected slice each entry came from).
+
+    Example:
+        For a CSC visibility matrix, ``gather_slices(csc.indptr, csc.indices, cols)``
+        gives the poses seeing each feature column of ``cols``.
+    """
+    starts = indptr[selected]
+    lengths = indptr[selected + 1] - starts
+    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
+    return indices[np.arange(int(lengths.sum())) + offsets], lengths
+
+
 def induced_subgraph(adjacency: sp.csr_matrix, poses: np.ndarray) -> sp.csr_matrix:
     """Return the adjacency (float64 CSR) of the subgraph induced by sorted ``poses``."""
     n = adjacency.shape[0]
     local = np.full(n, -1, dtype=np.int32)
     local[poses] = np.arange(poses.size, dtype=np.int32)
-    starts, stops = adjacency.indptr[poses], adjacency.indptr[poses + 1]
-    lengths = stops - starts
-    total = int(lengths.sum())
-    offsets = np.repeat(starts - np.concatenate([[0], np.cumsum(lengths)[:-1]]), lengths)
-    targets = local[adjacency.indices[np.arange(total) + offsets]]
+    neighbours, lengths = gather_slices(adjacency.indptr, adjacency.indices, poses)
+    targets = local[neighbours]
     keep = targets >= 0
     sources = np.repeat(np.arange(poses.size), lengths)
     kept_per_row = np.bincount(sources[keep], minlength=poses.size)
