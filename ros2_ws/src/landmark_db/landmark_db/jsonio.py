@@ -3,18 +3,16 @@
 World instances, decompositions and scenes are JSON files that users write by hand or
 with other tools, so every loader reports a missing file, unreadable bytes, invalid JSON
 and an invalid document the same way: one ``LandmarkDbError`` line starting with the
-path. Writers never leave a half-written file: they write a temporary sibling file and
-rename it into place.
+path. Writers never leave a half-written file (see ``landmark_db.atomic``).
 """
 from __future__ import annotations
 
 from collections.abc import Callable
 import json
-import os
 from pathlib import Path
-import tempfile
 from typing import Any, TypeVar
 
+from landmark_db.atomic import write_text_atomic
 from landmark_db.errors import LandmarkDbError
 
 __all__ = ['read_json_file', 'write_json_atomic']
@@ -60,19 +58,12 @@ def write_json_atomic(data: Any, path: str | Path, indent: int | None = None) ->
         data: a JSON-ready object.
         path: the target file.
         indent: ``None`` for compact JSON, else the indentation (for hand-edited files).
+
+    Raises:
+        LandmarkDbError: the output folder is missing or not writable.
     """
-    target = Path(path)
-    directory = target.parent if str(target.parent) else Path('.')
-    handle, temp_name = tempfile.mkstemp(prefix=f'.{target.name}.', suffix='.tmp',
-                                         dir=directory)
-    try:
-        with os.fdopen(handle, 'w', encoding='utf-8') as stream:
-            if indent is None:
-                json.dump(data, stream, separators=(',', ':'))
-            else:
-                json.dump(data, stream, indent=indent)
-            stream.write('\n')
-        os.replace(temp_name, target)
-    except BaseException:
-        Path(temp_name).unlink(missing_ok=True)
-        raise
+    if indent is None:
+        text = json.dumps(data, separators=(',', ':'))
+    else:
+        text = json.dumps(data, indent=indent)
+    write_text_atomic(path, text + '\n')
