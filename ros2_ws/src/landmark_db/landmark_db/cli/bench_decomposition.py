@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
 __all__ = ['register', 'run']
 
@@ -55,9 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark and write its outputs."""
     import json
-    from pathlib import Path
     import sys
 
+    from landmark_db.atomic import check_output_folder, write_text_atomic
     from landmark_db.errors import LandmarkDbError
 
     settings = _int_list(args.settings, '--settings')
@@ -79,7 +80,12 @@ def run(args: argparse.Namespace) -> int:
         raise LandmarkDbError(f'unknown algorithm(s) {unknown}; choose from '
                               f'{", ".join(ALGORITHMS)}')
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    if out.exists() and not out.is_dir():
+        raise LandmarkDbError(f'output folder {out} is a file')
+    if not out.exists():
+        # Create --out itself but not a missing parent: a mistyped path is an error.
+        check_output_folder(out)
+        out.mkdir()
 
     if args.calibrate:
         from landmark_db.bench.calibration import calibrate, format_calibration
@@ -88,8 +94,8 @@ def run(args: argparse.Namespace) -> int:
                          processes=args.processes)
         text = format_calibration(rows)
         print(text)
-        (out / 'calibration.txt').write_text(text + '\n')
-        (out / 'calibration.json').write_text(json.dumps(rows, indent=1))
+        write_text_atomic(out / 'calibration.txt', text + '\n')
+        write_text_atomic(out / 'calibration.json', json.dumps(rows, indent=1))
         return 0
 
     if args.scaling:
@@ -106,8 +112,8 @@ def run(args: argparse.Namespace) -> int:
                                f"{r['algorithm']} {r['seconds']:.2f} s", file=sys.stderr))
         text = format_scaling(rows)
         print(text)
-        (out / 'scaling.txt').write_text(text + '\n')
-        (out / 'scaling.json').write_text(json.dumps(rows, indent=1))
+        write_text_atomic(out / 'scaling.txt', text + '\n')
+        write_text_atomic(out / 'scaling.json', json.dumps(rows, indent=1))
         return 0 if all(r['valid'] for r in rows) else 1
 
     from landmark_db.bench.figures import (
@@ -148,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
     main_class = REDUCED if config.reduced else FULL
     text = format_report(summary, records, list(algorithms), main_class=main_class)
     print(text)
-    (out / 'tables.txt').write_text(text + '\n')
+    write_text_atomic(out / 'tables.txt', text + '\n')
     results = {
         'config': {'settings': list(settings), 'worlds': config.worlds, 'seed': config.seed,
                    'algorithms': list(algorithms), 'k': config.k, 'rho': config.rho,
@@ -162,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
                              'table_8_4': THESIS_TABLE_8_4},
         'records': records_as_dicts(records),
     }
-    (out / 'results.json').write_text(json.dumps(results, indent=1))
+    write_text_atomic(out / 'results.json', json.dumps(results, indent=1))
     _write_csv(out / 'results.csv', results['records'])
     plot_bar_chart(summary, list(algorithms), out / 'fig_8_3_bars.png', world_class=main_class)
     for setting, outcome in sorted(figure_worlds.items()):
@@ -206,13 +212,15 @@ def _int_list(text: str, name: str) -> tuple[int, ...]:
     return values
 
 
-def _write_csv(path: object, rows: list[dict[str, object]]) -> None:
+def _write_csv(path: Path, rows: list[dict[str, object]]) -> None:
     import csv
+
+    from landmark_db.atomic import atomic_output
 
     if not rows:
         return
     fields = [k for k in rows[0] if k != 'problems'] + ['problems']
-    with open(path, 'w', newline='') as handle:  # type: ignore[arg-type]
+    with atomic_output(path) as temporary, open(temporary, 'w', newline='') as handle:
         writer = csv.DictWriter(handle, fieldnames=fields)
         writer.writeheader()
         for row in rows:

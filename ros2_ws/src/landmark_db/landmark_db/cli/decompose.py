@@ -48,6 +48,7 @@ def run(args: argparse.Namespace) -> int:
     """Load the world, decompose it and write the decomposition."""
     import math
 
+    from landmark_db.atomic import check_output_folder
     from landmark_db.decomposition import decompose, save_decomposition
     from landmark_db.errors import LandmarkDbError
     from landmark_db.world import load_world
@@ -68,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
             raise LandmarkDbError(f'--time-limit must be positive, got {args.time_limit}')
         if args.algorithm in ('exact', 'best'):
             options['time_limit'] = args.time_limit
+    check_output_folder(args.out)  # before a decomposition that may take minutes
     world = load_world(args.world)
     decomposition = decompose(world, args.algorithm, args.k, args.rho, args.sigma,
                               alpha=args.alpha, rng=args.seed, **options)

@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     """Generate the world and write the requested files."""
     import math
 
+    from landmark_db.atomic import check_output_folder
     from landmark_db.errors import LandmarkDbError
     from landmark_db.scene import save_scene
     from landmark_db.simulator.settings import get_setting, small_setting
@@ -49,6 +50,10 @@ def run(args: argparse.Namespace) -> int:
         raise LandmarkDbError(f'--seed must be >= 0, got {args.seed}')
     if not (math.isfinite(args.spacing) and 0.05 <= args.spacing <= 10):
         raise LandmarkDbError(f'--spacing must be between 0.05 and 10 metres, got {args.spacing}')
+    # Before the simulation, so that a mistyped folder costs nothing and writes nothing.
+    check_output_folder(args.out)
+    if args.scene_out:
+        check_output_folder(args.scene_out)
     setting = get_setting(args.setting)
     if args.small:
         setting = small_setting(setting)
