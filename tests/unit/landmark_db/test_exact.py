@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from landmark_db.decomposition import decompose, validate
-from landmark_db.decomposition.exact import candidate_regions, solve_set_cover
+from landmark_db.decomposition.exact import candidate_regions
 from landmark_db.decomposition.problem import zero_problem
+from landmark_db.decomposition.set_cover import solve_set_cover
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
 

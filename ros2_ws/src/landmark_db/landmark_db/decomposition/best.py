@@ -43,14 +43,14 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from landmark_db.decomposition.exact import (
+from landmark_db.decomposition.problem import ZeroProblem, gather_slices, split_components
+from landmark_db.decomposition.redundancy import eliminate_redundant
+from landmark_db.decomposition.set_cover import (
     cover_matrix,
     merge_identical_rows,
     relaxed_uncovered,
     solve_set_cover,
 )
-from landmark_db.decomposition.problem import ZeroProblem, gather_slices, split_components
-from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.shrink_regions import shrink_regions
 from landmark_db.errors import LandmarkDbError
 

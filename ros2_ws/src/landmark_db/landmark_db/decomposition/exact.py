@@ -7,7 +7,7 @@ unchanged. So an optimum 0-MORDP decomposition is a minimum set cover of the
 k-coverable poses by the *maximal candidate regions*: the connected components of
 {v : L subset of F_v} over all k-subsets L of features seen together somewhere
 (every such L is a k-subset of some F_v). The cover is solved as a 0/1 integer
-program with SciPy's HiGHS (``scipy.optimize.milp``); identical rows (poses lying in
+program with SciPy's HiGHS (:mod:`.set_cover`); identical rows (poses lying in
 exactly the same candidates) are merged first.
 
 Under rho > 0 the same runs on the reduced instance (Theorem 4.1) and expands back
@@ -25,13 +25,12 @@ import itertools
 import math
 
 import numpy as np
-from scipy.optimize import Bounds, LinearConstraint, linprog, milp
-import scipy.sparse as sp
 
 from landmark_db.decomposition.problem import ZeroProblem, split_components
+from landmark_db.decomposition.set_cover import solve_set_cover
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['candidate_regions', 'exact_cover', 'relaxed_uncovered', 'solve_set_cover']
+__all__ = ['candidate_regions', 'exact_cover']
 
 MAX_SUBSETS = 200_000
 MAX_CANDIDATES = 50_000
@@ -85,162 +84,6 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
                         f'exact solver refused: more than {max_candidates} candidate '
                         f'regions; use a smaller world or k')
     return list(candidates.values())
-
-
-def cover_matrix(n_poses: int, required: np.ndarray, sets: list[np.ndarray]) -> sp.csr_matrix:
-    """Return the set-cover incidence matrix of ``required`` poses by candidate ``sets``.
-
-    Args:
-        n_poses: number of poses (pose indices are below it).
-        required: sorted poses to cover; row ``r`` is pose ``required[r]``.
-        sets: pose index arrays (the candidate regions); column ``j`` is ``sets[j]``.
-
-    Returns:
-        ``(len(required), len(sets))`` CSR matrix of ones with sorted indices; poses of
-        a set that are not required are left out.
-    """
-    sizes = np.array([s.size for s in sets], dtype=np.int64)
-    row_index = np.full(n_poses, -1, dtype=np.int64)
-    row_index[required] = np.arange(required.size)
-    flat = np.concatenate(sets)
-    cols = np.repeat(np.arange(len(sets)), sizes)
-    keep = row_index[flat] >= 0
-    matrix = sp.csr_matrix((np.ones(int(keep.sum())), (row_index[flat[keep]], cols[keep])),
-                           shape=(required.size, len(sets)))
-    matrix.sum_duplicates()
-    matrix.sort_indices()
-    return matrix
-
-
-def merge_identical_rows(matrix: sp.csr_matrix) -> tuple[sp.csr_matrix, list[np.ndarray]]:
-    """Merge the rows of a sorted-index CSR matrix that have the same column pattern.
-
-    Poses covered by exactly the same candidates are interchangeable in a cover, so
-    the integer program needs one row per pattern, weighted by its pose count.
-
-    Returns:
-        The merged matrix (one row per pattern, in order of first occurrence) and,
-        per merged row, the indices of the original rows it stands for.
-    """
-    groups: dict[bytes, list[int]] = {}
-    for r in range(matrix.shape[0]):
-        groups.setdefault(matrix.indices[matrix.indptr[r]:matrix.indptr[r + 1]].tobytes(),
-                          []).append(r)
-    members = [np.array(rows, dtype=np.int64) for rows in groups.values()]
-    first = np.array([rows[0] for rows in members], dtype=np.int64)
-    return matrix[first], members
-
-
-def solve_set_cover(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
-                    time_limit: float | None = None,
-                    budget: int | None = None,
-                    relative_gap: float | None = None,
-                    node_limit: int | None = None) -> tuple[np.ndarray, bool]:
-    """Solve a minimum set cover of ``required`` poses with HiGHS.
-
-    Without ``budget``: min |C| such that every required pose lies in a chosen set.
-    With ``budget``: a partial cover, min |C| such that at most ``budget`` required
-    poses are left uncovered (ties go to the cover leaving fewer uncovered); ``best``
-    uses this to cover at least as many poses as B.2 does under sigma.
-
-    Args:
-        n_poses: number of poses.
-        required: sorted poses to cover.
-        sets: sorted pose index arrays (the candidate regions).
-        time_limit: seconds for HiGHS, or None for no limit.
-        budget: most required poses that may stay uncovered, or None for none.
-        relative_gap: stop once the incumbent is within this relative gap of the
-            bound (None: HiGHS's default, i.e. prove optimality).
-        node_limit: most branch-and-bound nodes; unlike a time limit it keeps the
-            result independent of the machine's speed.
-
-    Returns:
-        (indices of the chosen sets, whether HiGHS proved the choice optimal).
-
-    Raises:
-        LandmarkDbError: if a required pose lies in no set (beyond ``budget``), or
-            HiGHS found no feasible solution in time.
-    """
-    if budget is not None and budget <= 0:
-        budget = None
-    if required.size == 0 or not sets:
-        if required.size > (budget or 0):
-            raise LandmarkDbError('set cover infeasible: no candidate sets')
-        return np.zeros(0, dtype=np.int64), True
-    matrix = cover_matrix(n_poses, required, sets)
-    empty_rows = np.diff(matrix.indptr) == 0
-    if empty_rows.any():
-        n_empty = int(empty_rows.sum())
-        if n_empty > (budget or 0):
-            bad = required[np.flatnonzero(empty_rows)[0]]
-            raise LandmarkDbError(f'set cover infeasible: pose {int(bad)} lies in no candidate')
-        budget = None if budget is None else budget - n_empty
-        matrix = matrix[np.flatnonzero(~empty_rows)]
-    # Poses lying in exactly the same candidates have identical rows: one row each.
-    matrix, members = merge_identical_rows(matrix)
-    n_sets, n_rows = len(sets), matrix.shape[0]
-    cost = np.ones(n_sets)
-    constraints = [LinearConstraint(matrix, lb=1, ub=np.inf)]
-    if budget:
-        row_weight = np.array([m.size for m in members], dtype=float)
-        matrix = sp.hstack([matrix, sp.identity(n_rows, format='csr')]).tocsr()
-        cost = np.concatenate([cost, row_weight / (row_weight.sum() + 1.0)])
-        limit = sp.csr_matrix(np.concatenate([np.zeros(n_sets), row_weight])[None, :])
-        constraints = [LinearConstraint(matrix, lb=1, ub=np.inf),
-                       LinearConstraint(limit, lb=0, ub=float(budget))]
-    options = {'disp': False}
-    if time_limit is not None:
-        options['time_limit'] = float(time_limit)
-    if relative_gap is not None:
-        options['mip_rel_gap'] = float(relative_gap)
-    if node_limit is not None:
-        options['node_limit'] = int(node_limit)
-    result = milp(c=cost, constraints=constraints, integrality=np.ones(cost.size),
-                  bounds=Bounds(0, 1), options=options)
-    if result.x is None:
-        raise LandmarkDbError(f'set cover: HiGHS found no cover ({result.message})')
-    chosen = np.flatnonzero(result.x[:n_sets] > 0.5)
-    return chosen, bool(result.status == 0)
-
-
-def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray],
-                      budget: int, method: str = 'highs-ipm',
-                      presolve: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Solve the LP relaxation of the budgeted partial cover.
-
-    min sum x_j s.t. sum_{j: v in S_j} x_j + y_v >= 1, sum y_v <= budget, 0 <= x, y <= 1.
-    ``y_v`` near 1 marks poses the relaxation prefers to leave uncovered.
-
-    Args:
-        n_poses: number of poses.
-        required: sorted poses to cover.
-        sets: sorted pose index arrays (the candidate regions).
-        budget: most required poses that may stay uncovered.
-        method: ``scipy.optimize.linprog`` HiGHS method.
-        presolve: whether HiGHS presolves the LP.
-
-    Returns:
-        ``(len(required),)`` y values and ``(len(sets),)`` x values (all 0 when the
-        LP fails).
-    """
-    if required.size == 0 or not sets:
-        return np.ones(required.size), np.zeros(len(sets))
-    matrix = cover_matrix(n_poses, required, sets)
-    merged, members = merge_identical_rows(matrix)
-    weight = np.array([m.size for m in members], dtype=float)
-    n_sets, n_rows = len(sets), merged.shape[0]
-    cover = sp.hstack([merged, sp.identity(n_rows, format='csr')]).tocsr()
-    limit = sp.csr_matrix(np.concatenate([np.zeros(n_sets), weight])[None, :])
-    cost = np.concatenate([np.ones(n_sets), weight * 1e-6])
-    result = linprog(cost, A_ub=sp.vstack([-cover, limit]).tocsr(),
-                     b_ub=np.concatenate([-np.ones(n_rows), [float(budget)]]),
-                     bounds=(0, 1), method=method, options={'presolve': presolve})
-    y = np.zeros(required.size)
-    if result.x is None:
-        return y, np.zeros(n_sets)
-    for value, rows in zip(result.x[n_sets:], members):
-        y[rows] = value
-    return y, result.x[:n_sets]
 
 
 def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,
