@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 
 from landmark_db.errors import LandmarkDbError
+from landmark_db.geometry2d import segments_blocked
 from landmark_db.scene import Scene, SceneFeatures, points_in_polygon
-from landmark_db.simulator.grid import pose_grid, wall_distance
+from landmark_db.simulator.grid import pose_grid
 from landmark_db.simulator.scene_sampler import inward_normals, random_scene
 from landmark_db.simulator.settings import SETTINGS, get_setting, small_setting
 from landmark_db.simulator.simulate import simulate_world, world_rng
-from landmark_db.simulator.visibility import compute_visibility, segments_blocked
+from landmark_db.simulator.visibility import compute_visibility
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 BLOCK = np.array([[4.0, 4.0], [6.0, 4.0], [6.0, 6.0], [4.0, 6.0]])
@@ -139,7 +140,7 @@ def test_pose_grid_avoids_obstacles_and_blocked_edges() -> None:
     scene = Scene(SQUARE, (BLOCK,))
     poses, edges = pose_grid(scene, 0.5)
     assert not np.any(points_in_polygon(poses, BLOCK))
-    assert np.all(wall_distance(scene, poses) >= 0.125 - 1e-12)
+    assert np.all(scene.wall_distance(poses) >= 0.125 - 1e-12)
     starts, ends, _ = scene.wall_segments()
     assert not np.any(segments_blocked(poses[edges[:, 0]], poses[edges[:, 1]], starts, ends))
     # 19 x 19 interior grid points minus the 5 x 5 inside or on the block.
@@ -164,7 +165,7 @@ def test_random_scene_is_well_formed(seed: int, number: int) -> None:
         assert np.all(points_in_polygon(obstacle, scene.perimeter))
         # Every polygon keeps the clearance from every other one.
         others = Scene(scene.perimeter, tuple(o for j, o in enumerate(scene.obstacles) if j != i))
-        assert wall_distance(others, obstacle).min() >= clearance - 1e-9
+        assert others.wall_distance(obstacle).min() >= clearance - 1e-9
     assert len(scene.obstacles) >= 1
     f = scene.features
     walls = sum(float(np.linalg.norm(np.roll(p, -1, axis=0) - p, axis=1).sum())
@@ -173,7 +174,7 @@ def test_random_scene_is_well_formed(seed: int, number: int) -> None:
     # Every feature faces into free space and lies on a wall.
     probe = f.positions + 0.02 * f.normals
     assert np.all(scene.free_space(probe))
-    assert np.all(wall_distance(scene, f.positions) < 1e-9)
+    assert np.all(scene.wall_distance(f.positions) < 1e-9)
     if setting.shape.rectangular:
         assert len(scene.perimeter) == 4
         assert all(len(o) == 4 for o in scene.obstacles)

@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from landmark_db.errors import LandmarkDbError
+from landmark_db.geometry2d import nearest_segment_distance
 from landmark_db.jsonio import read_json_file, write_json_atomic
 
 __all__ = ['Scene', 'SceneFeatures', 'load_scene', 'points_in_polygon', 'save_scene']
@@ -107,6 +108,18 @@ class Scene:
             ends.append(np.roll(polygon, -1, axis=0))
             index.append(np.full(len(polygon), i))
         return np.concatenate(starts), np.concatenate(ends), np.concatenate(index)
+
+    def wall_distance(self, points: np.ndarray) -> np.ndarray:
+        """Return each point's distance to the nearest wall segment.
+
+        Args:
+            points: ``(n, 2)`` query points, metres.
+
+        Returns:
+            ``(n,)`` distances, metres.
+        """
+        starts, ends, _ = self.wall_segments()
+        return nearest_segment_distance(points, starts, ends)
 
     def free_space(self, points: np.ndarray) -> np.ndarray:
         """Tell which points lie inside the perimeter and outside every obstacle.

@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 
 from landmark_db.errors import LandmarkDbError
+from landmark_db.geometry2d import segments_blocked
 from landmark_db.scene import Scene
-from landmark_db.simulator.visibility import segments_blocked
 
-__all__ = ['pose_grid', 'wall_distance']
+__all__ = ['pose_grid']
 
 
 def pose_grid(scene: Scene, spacing: float = 0.5,
@@ -45,7 +45,7 @@ def pose_grid(scene: Scene, spacing: float = 0.5,
     points = np.stack([gx.ravel(), gy.ravel()], axis=1)
     free = scene.free_space(points)
     if margin > 0 and free.any():
-        free[free] = wall_distance(scene, points[free]) >= margin
+        free[free] = scene.wall_distance(points[free]) >= margin
     index = np.full(points.shape[0], -1, dtype=np.int64)
     index[free] = np.arange(int(free.sum()))
     grid_index = index.reshape(gy.shape)
@@ -62,26 +62,3 @@ def pose_grid(scene: Scene, spacing: float = 0.5,
     edges = np.sort(edges, axis=1)
     edges = edges[np.lexsort((edges[:, 1], edges[:, 0]))]
     return poses, edges
-
-
-def wall_distance(scene: Scene, points: np.ndarray) -> np.ndarray:
-    """Distance from each point to the nearest wall segment, metres.
-
-    Args:
-        scene: the polygon world.
-        points: ``(n, 2)`` query points.
-
-    Returns:
-        ``(n,)`` distances.
-    """
-    starts, ends, _ = scene.wall_segments()
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
-    out = np.full(points.shape[0], np.inf)
-    d = ends - starts
-    length2 = np.maximum(np.sum(d * d, axis=1), 1e-300)
-    for lo in range(0, points.shape[0], 20000):
-        p = points[lo:lo + 20000, None, :]
-        t = np.clip(np.sum((p - starts) * d, axis=-1) / length2, 0.0, 1.0)
-        closest = starts + t[..., None] * d
-        out[lo:lo + 20000] = np.linalg.norm(p - closest, axis=-1).min(axis=1)
-    return out

@@ -21,10 +21,11 @@ import math
 
 import numpy as np
 
+from landmark_db.geometry2d import segment_distance
 from landmark_db.scene import Scene, SceneFeatures, points_in_polygon
 from landmark_db.simulator.settings import ShapeClass, WorldSetting
 
-__all__ = ['inward_normals', 'place_features', 'random_scene', 'segment_distance']
+__all__ = ['inward_normals', 'place_features', 'random_scene']
 
 _LOG = logging.getLogger(__name__)
 _CORNER_MARGIN = 0.05  # metres kept free of features at each polygon vertex
@@ -111,37 +112,6 @@ def inward_normals(scene: Scene) -> np.ndarray:
         into_polygon = left if ccw else -left
         out.append(into_polygon if i == 0 else -into_polygon)
     return np.concatenate(out)
-
-
-def segment_distance(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray,
-                     b1: np.ndarray) -> np.ndarray:
-    """Distance between segments ``a0-a1`` and ``b0-b1``, broadcast over leading axes.
-
-    Returns 0 for segments that cross.
-    """
-    def point_segment(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
-        d = s1 - s0
-        t = np.clip(np.sum((p - s0) * d, axis=-1) / np.maximum(np.sum(d * d, axis=-1), 1e-300),
-                    0.0, 1.0)
-        return np.linalg.norm(p - (s0 + t[..., None] * d), axis=-1)
-
-    dist = np.minimum.reduce([point_segment(a0, b0, b1), point_segment(a1, b0, b1),
-                              point_segment(b0, a0, a1), point_segment(b1, a0, a1)])
-    crossing = _segments_cross(a0, a1, b0, b1)
-    return np.where(crossing, 0.0, dist)
-
-
-def _segments_cross(a0: np.ndarray, a1: np.ndarray, b0: np.ndarray,
-                    b1: np.ndarray) -> np.ndarray:
-    def cross(o: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-        return ((p[..., 0] - o[..., 0]) * (q[..., 1] - o[..., 1])
-                - (p[..., 1] - o[..., 1]) * (q[..., 0] - o[..., 0]))
-
-    d1 = cross(b0, b1, a0)
-    d2 = cross(b0, b1, a1)
-    d3 = cross(a0, a1, b0)
-    d4 = cross(a0, a1, b1)
-    return (d1 * d2 < 0) & (d3 * d4 < 0)
 
 
 def _polygon_gap(p: np.ndarray, q: np.ndarray) -> float:

@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from landmark_db.geometry2d import point_segment_distance, segments_blocked
 from landmark_db.scene import Scene
 
-__all__ = ['compute_visibility', 'feature_walls', 'segments_blocked', 'visible_pairs']
+__all__ = ['compute_visibility', 'feature_walls', 'visible_pairs']
 
 _POSE_CHUNK_CELLS = 4_000_000  # poses x features per chunk of the cone/range pass
-_PAIR_CHUNK_CELLS = 8_000_000  # pairs x walls per chunk of the occlusion pass
-_T_EPS = 1e-9
 
 
 def compute_visibility(scene: Scene, poses: np.ndarray, tile: float = 8.0) -> np.ndarray:
@@ -137,58 +136,4 @@ def feature_walls(scene: Scene) -> np.ndarray:
     if len(positions) == 0:
         return np.zeros(0, dtype=np.int64)
     starts, ends, _ = scene.wall_segments()
-    d = ends - starts
-    length2 = np.maximum(np.sum(d * d, axis=1), 1e-300)
-    p = positions[:, None, :]
-    t = np.clip(np.sum((p - starts) * d, axis=-1) / length2, 0.0, 1.0)
-    dist = np.linalg.norm(p - (starts + t[..., None] * d), axis=-1)
-    return np.argmin(dist, axis=1)
-
-
-def segments_blocked(p: np.ndarray, q: np.ndarray, wall_starts: np.ndarray,
-                     wall_ends: np.ndarray, skip_wall: np.ndarray | None = None) -> np.ndarray:
-    """Tell which segments ``p[i] -> q[i]`` cross any wall segment.
-
-    A crossing counts when it lies strictly between the segment's end points and
-    anywhere on the wall, end points included.
-
-    Args:
-        p: ``(n, 2)`` segment starts.
-        q: ``(n, 2)`` segment ends.
-        wall_starts: ``(w, 2)`` wall segment starts.
-        wall_ends: ``(w, 2)`` wall segment ends.
-        skip_wall: optional ``(n,)`` wall index to ignore for each segment (the wall
-            a feature lies on), or -1.
-
-    Returns:
-        ``(n,)`` bool, True where the segment is blocked.
-    """
-    p = np.asarray(p, dtype=float).reshape(-1, 2)
-    q = np.asarray(q, dtype=float).reshape(-1, 2)
-    n, w = p.shape[0], wall_starts.shape[0]
-    blocked = np.zeros(n, dtype=bool)
-    if n == 0 or w == 0:
-        return blocked
-    s = wall_ends - wall_starts  # (w, 2)
-    step = max(1, _PAIR_CHUNK_CELLS // w)
-    wall_index = np.arange(w)
-    for lo in range(0, n, step):
-        a = p[lo:lo + step]
-        r = q[lo:lo + step] - a  # (c, 2)
-        ax = wall_starts[None, :, 0] - a[:, None, 0]  # (c, w)
-        ay = wall_starts[None, :, 1] - a[:, None, 1]
-        denom = r[:, None, 0] * s[None, :, 1] - r[:, None, 1] * s[None, :, 0]
-        t_num = ax * s[None, :, 1] - ay * s[None, :, 0]
-        u_num = ax * r[:, None, 1] - ay * r[:, None, 0]
-        # Divide-free form of 0 < t < 1 and 0 <= u <= 1, valid for either sign of denom.
-        sign = np.sign(denom)
-        abs_denom = np.abs(denom)
-        t_s = t_num * sign
-        u_s = u_num * sign
-        hit = ((abs_denom > 1e-12) & (t_s > _T_EPS * abs_denom)
-               & (t_s < (1 - _T_EPS) * abs_denom) & (u_s >= -1e-12 * abs_denom)
-               & (u_s <= (1 + 1e-12) * abs_denom))
-        if skip_wall is not None:
-            hit &= wall_index[None, :] != skip_wall[lo:lo + step, None]
-        blocked[lo:lo + step] = hit.any(axis=1)
-    return blocked
+    return np.argmin(point_segment_distance(positions[:, None, :], starts, ends), axis=1)
