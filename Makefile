@@ -9,8 +9,16 @@ VENV_STAMP := $(VENV)/.requirements-installed
 BUILD_STAMP := $(ROOT)/ros2_ws/install/.colcon-built
 # colcon --symlink-install links the Python sources, so only packaging files need a rebuild.
 PACKAGING := $(shell find ros2_ws/src -maxdepth 3 \( -name setup.py -o -name setup.cfg \
-	-o -name package.xml -o -path '*/config/*' -o -path '*/resource/*' \) -type f)
+	-o -name package.xml -o -path '*/config/*' -o -path '*/resource/*' -o -name CMakeLists.txt \
+	-o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -name '*.cmake' \) -type f)
 PKGS := landmark_db visibility_builder landmark_localizer
+# tf2_msgs (an ament_cmake interface package) is built from its Jazzy definitions because the
+# ROS 2 wheels have none. CMake finds the wheels' type supports through AMENT_PREFIX_PATH, the
+# upstream linters are not installed (BUILD_TESTING=OFF), and cmake/manylinux_paths.cmake
+# rewrites the wheels' exported header paths to this interpreter's (its comment says why).
+TF2_CMAKE_ARGS := -DBUILD_TESTING=OFF \
+	-DCMAKE_PROJECT_INCLUDE=$(ROOT)/ros2_ws/src/tf2_msgs/cmake/manylinux_paths.cmake \
+	-DPython3_EXECUTABLE=$(VENV)/bin/python
 
 .PHONY: setup test lint demo clean sample-bags cache-bags
 
@@ -23,8 +31,11 @@ $(VENV_STAMP): requirements.txt
 
 $(BUILD_STAMP): $(VENV_STAMP) $(PACKAGING)
 	flock $(LOCK) bash -c 'source $(VENV)/bin/activate && cd ros2_ws && \
-	  colcon --log-base log build --symlink-install --event-handlers console_cohesion- \
-	  summary+ status-'
+	  skip=$$($(VENV)/bin/python src/tf2_msgs/cmake/provided_elsewhere.py && \
+	    echo "--packages-skip tf2_msgs"); \
+	  export AMENT_PREFIX_PATH=$(VENV)$${AMENT_PREFIX_PATH:+:$$AMENT_PREFIX_PATH}; \
+	  colcon --log-base log build --symlink-install $$skip --event-handlers console_cohesion- \
+	  summary+ status- --cmake-args $(TF2_CMAKE_ARGS)'
 	touch $@
 
 env.sh: Makefile

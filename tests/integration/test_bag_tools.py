@@ -21,7 +21,7 @@ pytestmark = pytest.mark.integration
 T = TYPESTORE.types
 VBN = 'vbn'
 WAIT = 120.0  # generous bound for discovery on a loaded 2-core machine
-TOPICS = ['/camera/image_raw', '/ground_truth/pose', '/odom', '/chatter']
+TOPICS = ['/camera/image_raw', '/ground_truth/pose', '/odom', '/chatter', '/tf']
 
 
 def header(stamp_ns: int, frame: str) -> object:
@@ -103,13 +103,12 @@ def test_play_to_record_round_trip_is_byte_exact(tmp_path: Path, start_process) 
     play = start_process([VBN, 'play', str(tmp_path / 'source'), '--wait-for-subscribers',
                           '--wait-timeout', str(WAIT)], name='play')
     assert play.wait(timeout=2 * WAIT) == 0, play.output
-    assert f'done: published {15 * 3 + 3} messages' in play.output
-    assert 'skipping /tf: message type tf2_msgs/msg/TFMessage has no Python package here' \
-        in play.output
+    assert f'done: published {15 * 4 + 3} messages' in play.output
+    assert 'skipping' not in play.output  # /tf plays: tf2_msgs is built in the workspace
     for topic in TOPICS:
         record.wait_for_output(f'first message on {re.escape(topic)}', timeout=WAIT)
     assert record.stop() == 0, record.output
-    assert 'wrote 48 messages' in record.output, record.output
+    assert 'wrote 63 messages' in record.output, record.output
     got = recorded_raw(out)
     assert set(got) == set(TOPICS)
     for topic in TOPICS:
@@ -125,9 +124,10 @@ SAMPLE = Path(__file__).resolve().parents[2] / 'bags' / 'floor_exploration'
 
 @pytest.mark.skipif(not SAMPLE.is_dir(), reason='sample bag bags/floor_exploration missing')
 def test_sample_bag_round_trip_is_byte_exact(tmp_path: Path, start_process) -> None:
-    # A committed sample, played eight times faster: every playable message comes back
-    # byte for byte and in order (/tf and /tf_static have no Python type here).
-    topics = ['/camera/image_raw/compressed', '/camera/camera_info', '/ground_truth/pose']
+    # A committed sample, played eight times faster: every message comes back byte for
+    # byte and in order, /tf and the transient-local /tf_static included.
+    topics = ['/camera/image_raw/compressed', '/camera/camera_info', '/ground_truth/pose',
+              '/tf', '/tf_static']
     out = tmp_path / 'recorded'
     record = start_process([VBN, 'record', '--topics', *topics, '--out', str(out)],
                            name='record')
@@ -140,8 +140,10 @@ def test_sample_bag_round_trip_is_byte_exact(tmp_path: Path, start_process) -> N
     got = recorded_raw(out)
     assert set(got) == set(topics)
     for topic in topics:
-        assert len(got[topic]) == len(original[topic]) == 84, topic
+        assert len(got[topic]) == len(original[topic]) == (1 if topic == '/tf_static' else 84)
         assert got[topic] == original[topic], topic
+    with open_bag(out) as reader:  # recorded with the QoS it was offered: latched
+        assert reader.topics['/tf_static'].qos_profiles[0].durability.name == 'TRANSIENT_LOCAL'
 
 
 def test_record_killed_with_sigint_leaves_a_valid_bag(tmp_path: Path, start_process) -> None:
@@ -256,15 +258,12 @@ def test_empty_bag_and_unplayable_types(tmp_path: Path, start_process) -> None:
     code, output = run_vbn(start_process, 'bag-info', str(tmp_path / 'empty'))
     assert code == 0 and re.search(r'WARNING .*contains no messages', output), output
     with BagWriter(tmp_path / 'unplayable') as bag:
-        conn = bag.add_topic('/tf', 'tf2_msgs/msg/TFMessage')
-        bag.write(conn, 1, T['tf2_msgs/msg/TFMessage'](transforms=[]))
         custom = bag.add_topic('/custom', 'my_msgs/msg/Thing', msgdef='int32 value\n')
         bag.write_raw(custom, 2, bytes([0, 1, 0, 0, 42, 0, 0, 0]))
     code, output = run_vbn(start_process, 'bag-info', str(tmp_path / 'unplayable'))
     assert code == 0 and 'Type: my_msgs/msg/Thing' in output, output
     code, output = run_vbn(start_process, 'play', str(tmp_path / 'unplayable'))
     assert_one_line_error(code, output, 'play', 'nothing to play')
-    assert output.count('skipping /tf: message type tf2_msgs/msg/TFMessage') == 1
     assert output.count('skipping /custom: message type my_msgs/msg/Thing') == 1
 
 
@@ -292,11 +291,11 @@ def test_player_start_offset_topics_and_rate(tmp_path: Path, ros_node) -> None:
     with open_bag(tmp_path / 'bag') as reader:
         player = Player(ros_node.node, reader, PlayOptions(
             rate=5.0, start_offset_s=0.5, topics=('/odom', '/tf')))
-        assert list(player.publishers) == ['/odom']
-        assert player.stats.skipped_topics == ['/tf']
+        assert list(player.publishers) == ['/odom', '/tf']
+        assert player.stats.skipped_topics == []
         stats = player.play()
-    # /odom messages at i/30 s + 2 ns: those at or after 0.5 s are i = 15..29.
-    assert stats.published == 15
+    # /odom and /tf messages at i/30 s + a few ns: those at or after 0.5 s are i = 15..29.
+    assert stats.published == 30
     assert stats.clock_published == 0
 
 

@@ -26,7 +26,9 @@ def test_import_message_class() -> None:
     from sensor_msgs.msg import Image
     assert import_message_class('sensor_msgs/msg/Image') is Image
     assert import_message_class('geometry_msgs/PoseStamped') is PoseStamped
-    assert import_message_class('tf2_msgs/msg/TFMessage') is None  # not in the pip ROS 2
+    from tf2_msgs.msg import TFMessage  # built in the workspace (ros2_ws/src/tf2_msgs)
+    assert import_message_class('tf2_msgs/msg/TFMessage') is TFMessage
+    assert import_message_class('my_msgs/msg/Thing') is None  # no such package here
     assert import_message_class('sensor_msgs/msg/NoSuchType') is None
     with pytest.raises(VisibilityBuilderError):
         import_message_class('Image')

@@ -11,9 +11,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
         'play', help='publish a bag over DDS with its recorded timing and QoS',
         description='Publish the serialized messages of a rosbag2 MCAP bag on their recorded '
-                    'topics, with their recorded timing and QoS, like ros2 bag play. Topics '
-                    'whose message type has no Python package here (e.g. /tf) are skipped '
-                    'with a warning.')
+                    'topics, with their recorded timing and QoS, like ros2 bag play (/tf and '
+                    '/tf_static included; /tf_static transient-local as recorded). A topic '
+                    'whose message type has no Python package installed is left out with a '
+                    'warning.')
     parser.add_argument('bag', metavar='BAGDIR', help='bag directory (or a .mcap file)')
     parser.add_argument('--rate', type=float, default=1.0,
                         help='playback speed factor (default 1.0)')

@@ -3,9 +3,10 @@
 Messages go out serialized, exactly as recorded (``Publisher.publish(bytes)``
 publishes raw CDR in rclpy 7 / Jazzy), so a play-to-record round trip reproduces
 them byte for byte. Each topic is published with the QoS recorded in the bag
-(:func:`~visibility_builder.ros_tools.msgtypes.profile_from_bag_qos`); a topic whose
-message type has no Python package here (``/tf``: no ``tf2_msgs`` in the
-pip-installed ROS 2) is skipped with one warning.
+(:func:`~visibility_builder.ros_tools.msgtypes.profile_from_bag_qos`), so ``/tf_static``
+goes out transient-local as recorded (``tf2_msgs`` is built in the workspace). A topic
+whose message type has no Python package at all (a custom type the bag carries but
+this machine does not) is left out with one warning naming it.
 
 Timing: message ``i`` is due at ``wall_start + (t_i - t_start) / rate``. The
 player sleeps until shortly before the deadline and spin-waits the rest on
