@@ -22,6 +22,9 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.ros_environment import check_ros_environment
+
 __all__ = ['EchoNode', 'PingResult', 'main', 'ping']
 
 PING_TOPIC = '/vbn_doctor/ping'
@@ -115,13 +118,20 @@ def ping(node: Node, text: str, suffix: str = '', timeout_s: float = 30.0,
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the echo side: ``dds_probe echo [--suffix S]``."""
+    """Run the echo side: ``dds_probe echo [--suffix S]``; return 2 for a bad ROS environment."""
     parser = argparse.ArgumentParser(prog='dds_probe', description=__doc__.splitlines()[0])
     parser.add_argument('role', choices=['echo'], help='the role of this process')
     parser.add_argument('--suffix', default='', help='suffix of the ping/pong topic names')
     args = parser.parse_args(rclpy.utilities.remove_ros_args(
         list(sys.argv if argv is None else ['dds_probe', *argv]))[1:])
-    rclpy.init()
+    try:
+        check_ros_environment()
+        from visibility_builder.ros_tools.session import rcl_errors_as_one_line
+        with rcl_errors_as_one_line('initialise ROS 2'):
+            rclpy.init()
+    except VisibilityBuilderError as error:
+        print(f'dds_probe: error: {error}', file=sys.stderr)
+        return 2
     node = EchoNode(args.suffix)
     try:
         rclpy.spin(node)

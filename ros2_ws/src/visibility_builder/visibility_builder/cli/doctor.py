@@ -31,32 +31,87 @@ def _version(module: str) -> str:
         return 'not installed'
 
 
-def run(args: argparse.Namespace) -> int:
-    """Print the report and the verdict; return 0 when the exchange worked."""
-    import cv2
-    import rclpy
-    from rclpy.utilities import get_rmw_implementation_identifier
+def _tf2_report() -> tuple[list[str], str]:
+    """Lines about tf2_msgs, and a problem ('' when none) for the verdict."""
+    from rosbags.typesys import Stores, get_typestore
 
-    from visibility_builder.dds_probe import ping
+    from visibility_builder.ros_tools.msgtypes import import_message_class, message_type_hash
+
+    msgtype = 'tf2_msgs/msg/TFMessage'
+    cls = import_message_class(msgtype)
+    if cls is None:
+        # Only /tf and /tf_static need it; the DDS check does not.
+        return ['tf2_msgs:      not importable (run make setup)'], ''
+    package = sys.modules['tf2_msgs']
+    built = message_type_hash(cls)
+    jazzy = get_typestore(Stores.ROS2_JAZZY).hash_rihs01(msgtype)
+    match = 'match' if built == jazzy else 'MISMATCH'
+    lines = [f'tf2_msgs:      importable ({os.path.dirname(package.__file__ or "?")})',
+             f'tf2 hash:      {built or "unknown (no type support)"} ({msgtype} as built here)',
+             f'jazzy hash:    {jazzy} (rosbags, ROS 2 Jazzy): {match}']
+    if built == jazzy:
+        return lines, ''
+    return lines, (f'{msgtype} was built with type hash {built or "unknown"}, ROS 2 Jazzy has '
+                   f'{jazzy} (rebuild it with make setup)')
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the report and the verdict; return 0 when the exchange worked, else 1.
+
+    The ROS 2 environment variables are checked before rclpy is imported: a value
+    rclpy cannot use gives a ``verdict: FAILED - <variable>=<value> ... (allowed:
+    ...)`` line instead of a traceback or a silent exit.
+    """
+    import cv2
+
+    from visibility_builder.errors import VisibilityBuilderError
+    from visibility_builder.ros_environment import (
+        installed_rmw_implementations,
+        ros_environment_problems,
+    )
 
     print(f'python:        {platform.python_version()} ({sys.executable})')
     print(f'rclpy:         {_version("ros-rclpy")} (ROS 2 Jazzy wheels)')
     print(f'opencv:        {cv2.__version__}')
     print(f'rosbags:       {_version("rosbags")}')
-    print(f'ROS_DOMAIN_ID: {os.environ.get("ROS_DOMAIN_ID", "0 (unset)")}, '
-          f'discovery range: {os.environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE", "SUBNET (unset)")}')
+    discovery = os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') or 'SUBNET (unset)'
+    print(f'ROS_DOMAIN_ID: {os.environ.get("ROS_DOMAIN_ID") or "0 (unset)"}, '
+          f'discovery range: {discovery}')
+    rmw_installed = installed_rmw_implementations()
+    print(f'rmw installed: {", ".join(rmw_installed) or "none found"}; '
+          f'RMW_IMPLEMENTATION: {os.environ.get("RMW_IMPLEMENTATION") or "unset"}')
+    problems = ros_environment_problems(os.environ, rmw_installed)
+    if problems:
+        # Importing rclpy (or the tf2 check, which loads it) could end the process.
+        print('tf2_msgs:      not checked (the ROS environment is not usable)')
+        print(f'verdict:       FAILED - {"; ".join(problems)}')
+        return 1
+    tf2_lines, tf2_problem = _tf2_report()
+    for line in tf2_lines:
+        print(line)
+
+    import rclpy
+    from rclpy.utilities import get_rmw_implementation_identifier
+
+    from visibility_builder.dds_probe import ping
+    from visibility_builder.ros_tools.session import rcl_errors_as_one_line
 
     suffix = f'_{os.getpid()}'
     echo = subprocess.Popen(
         [sys.executable, '-m', 'visibility_builder.dds_probe', 'echo', '--suffix', suffix],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    rclpy.init()
+    text = f'hello from vbn doctor, nonce {uuid.uuid4().hex[:12]}'
+    result = None
+    failure = ''
     try:
-        print(f'rmw:           {get_rmw_implementation_identifier()}')
-        node = rclpy.create_node('vbn_doctor')
-        text = f'hello from vbn doctor, nonce {uuid.uuid4().hex[:12]}'
+        with rcl_errors_as_one_line('initialise ROS 2'):
+            rclpy.init()
+            print(f'rmw:           {get_rmw_implementation_identifier()}')
+            node = rclpy.create_node('vbn_doctor')
         result = ping(node, text, suffix=suffix, timeout_s=args.timeout)
         node.destroy_node()
+    except VisibilityBuilderError as error:
+        failure = str(error)
     finally:
         rclpy.try_shutdown()
         echo.terminate()
@@ -65,14 +120,19 @@ def run(args: argparse.Namespace) -> int:
         except subprocess.TimeoutExpired:
             echo.kill()
             _, stderr = echo.communicate()
-    print(f'dds exchange:  echo node in process {echo.pid}, discovery {result.discovery_s:.2f} s')
-    if result.ok:
-        print(f'published:     "{text}"')
-        print(f'echoed back:   "{result.message}" (round trip {result.round_trip_ms:.1f} ms)')
+    if result is not None:
+        print(f'dds exchange:  echo node in process {echo.pid}, '
+              f'discovery {result.discovery_s:.2f} s')
+        if result.ok:
+            print(f'published:     "{text}"')
+            print(f'echoed back:   "{result.message}" (round trip {result.round_trip_ms:.1f} ms)')
+        else:
+            failure = result.detail
+    if not failure and not tf2_problem:
         print('verdict:       OK - a publisher and a subscriber in two processes '
               'exchanged messages over DDS')
         return 0
-    print(f'verdict:       FAILED - {result.detail}')
-    if stderr.strip():
+    print(f'verdict:       FAILED - {"; ".join(p for p in (failure, tf2_problem) if p)}')
+    if failure and stderr.strip():
         print('echo node said: ' + stderr.strip().splitlines()[-1])
     return 1

@@ -4,3 +4,10 @@ These are the only modules of visibility_builder's bag tools that import rclpy o
 message packages; the bag reading and writing they use is in
 :mod:`visibility_builder.bag_io`.
 """
+
+# Checked on import, before any module of this package imports rclpy: with an
+# RMW_IMPLEMENTATION that is not installed, rcl ends the process (exit 102) while its
+# library loads, so a check at rclpy.init would come too late.
+from visibility_builder.ros_environment import check_ros_environment
+
+check_ros_environment()

@@ -8,6 +8,7 @@ QoS the way ``ros2 bag record`` and ``ros2 topic echo`` do.
 """
 from __future__ import annotations
 
+import ctypes
 import importlib
 import logging
 import time
@@ -37,6 +38,7 @@ __all__ = [
     'DEFAULT_DEPTH',
     'bag_qos_from_profile',
     'import_message_class',
+    'message_type_hash',
     'profile_from_bag_qos',
     'subscription_qos_for',
     'wait_for_topic_type',
@@ -66,6 +68,64 @@ def import_message_class(msgtype: str) -> type | None:
     if cls is None or not hasattr(cls, 'get_fields_and_field_types'):
         return None
     return cls
+
+
+class _TypeHash(ctypes.Structure):
+    """``rosidl_type_hash_t``: a version byte and a 32-byte SHA-256 digest."""
+
+    _fields_ = [('version', ctypes.c_uint8), ('value', ctypes.c_uint8 * 32)]
+
+
+class _MessageTypeSupport(ctypes.Structure):
+    """The leading fields of Jazzy's ``rosidl_message_type_support_t``."""
+
+    _fields_ = [('typesupport_identifier', ctypes.c_char_p), ('data', ctypes.c_void_p),
+                ('func', ctypes.c_void_p), ('get_type_hash_func', ctypes.c_void_p)]
+
+
+_GET_TYPE_HASH = ctypes.CFUNCTYPE(ctypes.POINTER(_TypeHash), ctypes.c_void_p)
+
+
+def message_type_hash(cls: type) -> str | None:
+    """Return the RIHS01 type hash that a generated message class was built with.
+
+    Jazzy's generated Python classes do not expose the hash; their C type support
+    (the one rmw advertises in discovery) does, through its ``get_type_hash_func``.
+    The same hash is in ``share/<pkg>/msg/<Type>.json`` of the package's install,
+    and rosbags computes it from the definitions (``Typestore.hash_rihs01``).
+
+    Args:
+        cls: a generated message class, e.g. ``geometry_msgs.msg.PoseStamped``.
+
+    Returns:
+        ``'RIHS01_<64 hex digits>'``, or None when ``cls`` is not a generated message
+        class or its type support cannot be loaded or carries no hash.
+    """
+    metaclass = type(cls)
+    import_type_support = getattr(metaclass, '__import_type_support__', None)
+    if import_type_support is None:
+        return None
+    if getattr(metaclass, '_TYPE_SUPPORT', None) is None:
+        import_type_support()  # logs at DEBUG and leaves None if the library is missing
+    capsule = getattr(metaclass, '_TYPE_SUPPORT', None)
+    if capsule is None:
+        return None
+    get_name = ctypes.pythonapi.PyCapsule_GetName
+    get_name.restype, get_name.argtypes = ctypes.c_char_p, [ctypes.py_object]
+    get_pointer = ctypes.pythonapi.PyCapsule_GetPointer
+    get_pointer.restype = ctypes.c_void_p
+    get_pointer.argtypes = [ctypes.py_object, ctypes.c_char_p]
+    address = get_pointer(capsule, get_name(capsule))
+    if not address:
+        return None
+    support = _MessageTypeSupport.from_address(address)
+    # Only the C type support's layout is known here (rosidl_generator_py uses it).
+    if support.typesupport_identifier != b'rosidl_typesupport_c' or not support.get_type_hash_func:
+        return None
+    type_hash = _GET_TYPE_HASH(support.get_type_hash_func)(address)
+    if not type_hash or type_hash.contents.version != 1:
+        return None
+    return 'RIHS01_' + bytes(type_hash.contents.value).hex()
 
 
 def profile_from_bag_qos(profiles: list[Qos]) -> QoSProfile:

@@ -4,6 +4,10 @@ rclpy's own SIGINT handler shuts the context down under the tool's feet; the bag
 tools need to finish their work first (``record`` closes its bag, ``play`` waits
 for acknowledgements), so they initialize rclpy without signal handlers and
 handle SIGINT and SIGTERM themselves.
+
+The ROS 2 environment variables are checked before rclpy initialises (see
+:mod:`visibility_builder.ros_environment`), and an ``RCLError`` that rclpy still
+raises while initialising becomes one :class:`VisibilityBuilderError` line.
 """
 from __future__ import annotations
 
@@ -13,7 +17,30 @@ import os
 import signal
 from typing import Any
 
-__all__ = ['on_stop_signals', 'ros_node']
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.ros_environment import check_ros_environment
+
+__all__ = ['on_stop_signals', 'rcl_errors_as_one_line', 'ros_node']
+
+
+@contextmanager
+def rcl_errors_as_one_line(doing: str) -> Iterator[None]:
+    """Turn an ``RCLError`` raised inside the block into a one-line VisibilityBuilderError.
+
+    Args:
+        doing: what the block does, for the message (e.g. ``'initialise ROS 2'``).
+
+    Raises:
+        VisibilityBuilderError: ``cannot <doing>: <rcl's message without its source location>``.
+    """
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
+    try:
+        yield
+    except rclpy_implementation.RCLError as error:
+        detail = str(error).strip().splitlines()[0] if str(error).strip() else repr(error)
+        detail = detail.split(', at /')[0]  # rcl appends the C source file and line
+        raise VisibilityBuilderError(f'cannot {doing}: {detail}') from None
 
 
 @contextmanager
@@ -21,17 +48,24 @@ def ros_node(name: str) -> Iterator[tuple[Any, Any]]:
     """Yield ``(node, executor)`` in a fresh rclpy context; clean up on exit.
 
     The node name gets the process id appended so that two tools never share a name.
+
+    Raises:
+        VisibilityBuilderError: the ROS 2 environment variables have a value rclpy
+            cannot use, or rclpy failed to initialise (one line each).
     """
+    check_ros_environment()
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.signals import SignalHandlerOptions
 
     context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    with rcl_errors_as_one_line('initialise ROS 2'):
+        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     executor = None
     try:
-        node = rclpy.create_node(f'{name}_{os.getpid()}', context=context)
+        with rcl_errors_as_one_line('initialise ROS 2'):
+            node = rclpy.create_node(f'{name}_{os.getpid()}', context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         yield node, executor
