@@ -19,7 +19,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--count', type=int, default=None, metavar='N',
                         help='print N messages and exit')
     parser.add_argument('--timeout', type=float, default=None, metavar='S',
-                        help='fail if the messages asked for do not arrive within S seconds')
+                        help='fail if no publisher appears or the messages asked for do not '
+                             'arrive within S seconds (default: wait, saying so once on stderr)')
     parser.add_argument('--type', dest='msgtype', default=None, metavar='TYPE',
                         help='message type (default: from the graph)')
     parser.add_argument('--truncate-length', type=int, default=128, metavar='N',
@@ -57,7 +58,8 @@ def run(args: argparse.Namespace) -> int:
 
     with on_stop_signals(raise_keyboard_interrupt), ros_node('vbn_echo') as (node, executor):
         try:
-            echo_topic(node, executor, args.topic, options, write)
+            echo_topic(node, executor, args.topic, options, write,
+                       notify=lambda line: print(line, file=sys.stderr, flush=True))
         except KeyboardInterrupt:
             pass
     return 0

@@ -2,6 +2,8 @@
 
 The topic's type comes from the graph (waiting until a publisher appears), its
 class from ``<pkg>.msg``; the subscription's QoS adapts to the publishers' offer.
+Waiting without a timeout is announced once, so that a missing publisher does not
+look like a hang.
 """
 from __future__ import annotations
 
@@ -16,11 +18,15 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.ros_tools.msgtypes import (
     import_message_class,
     subscription_qos_for,
+    topic_types,
     wait_for_topic_type,
 )
 from visibility_builder.ros_tools.yaml_echo import message_to_yaml
 
-__all__ = ['EchoOptions', 'echo_topic']
+__all__ = ['NOTICE_AFTER_S', 'EchoOptions', 'echo_topic']
+
+#: Seconds without a publisher (and without a timeout) before the waiting is announced.
+NOTICE_AFTER_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -45,15 +51,28 @@ class EchoOptions:
 
 
 def echo_topic(node: Node, executor: Any, topic: str, options: EchoOptions,
-               write: Callable[[str], None]) -> int:
+               write: Callable[[str], None],
+               notify: Callable[[str], None] | None = None) -> int:
     """Print messages of ``topic`` through ``write``; return how many were printed.
+
+    Args:
+        node: a node in an initialised rclpy context, spun by ``executor``.
+        executor: the executor that spins ``node``.
+        topic: the topic name.
+        options: what to print and for how long.
+        write: takes each message's YAML (with its ``---`` line).
+        notify: takes one line, once, when there is no timeout and no publisher of
+            ``topic`` after :data:`NOTICE_AFTER_S` seconds (``vbn echo`` writes it to
+            stderr).
 
     Raises:
         VisibilityBuilderError: No publisher or not enough messages within the
             timeout, or a type without a Python package here.
     """
     start = time.monotonic()
-    msgtype = options.msgtype or wait_for_topic_type(node, topic, executor, options.timeout_s)
+    notice = _WaitingNotice(node, topic, start, notify if options.timeout_s is None else None)
+    msgtype = options.msgtype or _wait_for_type(node, executor, topic, options.timeout_s,
+                                                notice)
     cls = import_message_class(msgtype)
     if cls is None:
         raise VisibilityBuilderError(
@@ -76,5 +95,39 @@ def echo_topic(node: Node, executor: Any, topic: str, options: EchoOptions,
             raise VisibilityBuilderError(
                 f'received {received} of {wanted}messages on {topic} within '
                 f'{options.timeout_s:g} s')
+        if received == 0:
+            notice.check()  # --type given and nobody publishes yet
         executor.spin_once(timeout_sec=0.05)
     return received
+
+
+class _WaitingNotice:
+    """Say once that echo is waiting for a publisher, if it has waited long enough."""
+
+    def __init__(self, node: Node, topic: str, start: float,
+                 notify: Callable[[str], None] | None) -> None:
+        self._node = node
+        self._topic = topic
+        self._start = start
+        self._notify = notify
+
+    def check(self) -> None:
+        if (self._notify is None or time.monotonic() - self._start < NOTICE_AFTER_S
+                or self._node.count_publishers(self._topic) > 0):
+            return
+        self._notify(f'waiting for a publisher on {self._topic} (use --timeout S to give up)')
+        self._notify = None
+
+
+def _wait_for_type(node: Node, executor: Any, topic: str, timeout_s: float | None,
+                   notice: _WaitingNotice) -> str:
+    """Wait for the topic's type in the graph; announce the waiting once (no timeout)."""
+    if timeout_s is not None:
+        return wait_for_topic_type(node, topic, executor, timeout_s)
+    try:
+        return wait_for_topic_type(node, topic, executor, NOTICE_AFTER_S)
+    except VisibilityBuilderError:
+        if len(topic_types(node).get(topic, [])) > 1:
+            raise  # several types: waiting longer would not help
+    notice.check()
+    return wait_for_topic_type(node, topic, executor, None)
