@@ -1,0 +1,762 @@
+"""The landmark database in memory: what the builder fills and the localizer reads.
+
+A landmark database (thesis Sections 1.1, 3.1.4, 7.1 and 7.2) records, for a world
+decomposed into regions, which landmark (k features) to use at each pose, the
+appearance of every feature, and for every region two or three *model views*: images
+taken inside the region in which all k landmark features are visible, with the pose at
+which each was taken. The localizer votes for regions with the features it sees (the
+feature-to-region membership, Section 7.1), tracks a region's k features, switches
+between overlapping regions (the region graph, Section 7.1) and computes its pose from
+the features' locations in the model views (Section 7.2).
+
+Identifiers: pose ``i`` is row ``i`` of :class:`SampledPoses`; class ``c`` (a scene
+feature, the correspondence class of Algorithm 6.3) is entry ``c`` of
+:class:`FeatureClasses`, and is also the feature id of column ``c`` of the exported
+world instance; region ``r`` is ``LandmarkDatabase.regions[r]``.
+
+Every dataclass here is frozen and validates its input in ``__post_init__``: arrays are
+copied into the documented dtype and made read-only, so a database cannot change after
+it was checked. The checks are *structural* (shapes, dtypes, finite numbers, indices in
+range, no duplicates, each model view holds every landmark feature of its region);
+whether the regions form a valid decomposition is the validator's job
+(``vbn db-export`` then ``vbn validate``), so that a database built with a faulty
+decomposition can still be opened and inspected.
+
+Two departures from a literal reading of the issue, both documented where they apply:
+a model view may hold features of its image that belong to no class (class id ``-1``),
+kept for the matching symmetry check of Section 6.2.1; and :class:`BuildInfo` carries
+``decomposition_seconds`` so that the exported decomposition reports the real time.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from datetime import UTC, datetime, timedelta
+from functools import cached_property
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from landmark_db.decomposition import Decomposition, Region
+from landmark_db.errors import LandmarkDbError
+from landmark_db.world import WorldInstance, adjacency_matrix
+
+__all__ = [
+    'CAMERA_KINDS',
+    'DESCRIPTOR_SIZE',
+    'POSE_SOURCES',
+    'BuildInfo',
+    'CameraIntrinsics',
+    'FeatureClasses',
+    'LandmarkDatabase',
+    'ModelView',
+    'RegionAdjacency',
+    'RegionRecord',
+    'SampledPoses',
+    'utc_now_iso',
+]
+
+DESCRIPTOR_SIZE = 128
+"""Length of a SIFT descriptor; descriptors are stored as uint8 (SIFT's are integers)."""
+
+CAMERA_KINDS = ('panoramic', 'pinhole')
+POSE_SOURCES = ('ground_truth', 'tf', 'estimated')
+
+
+def utc_now_iso() -> str:
+    """Return the current UTC time as ISO 8601 (``2026-12-01T13:22:15+00:00``)."""
+    return datetime.now(UTC).isoformat(timespec='seconds')
+
+
+class _ArrayEquality:
+    """Field-by-field equality that compares arrays and sparse matrices by value."""
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(_values_equal(getattr(self, f.name), getattr(other, f.name))
+                   for f in fields(self))  # type: ignore[arg-type]
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+@dataclass(frozen=True, eq=False)
+class CameraIntrinsics(_ArrayEquality):
+    """The camera the exploration images were taken with.
+
+    Attributes:
+        kind: ``'panoramic'`` or ``'pinhole'``.
+        width: image width, pixels (> 0).
+        height: image height, pixels (> 0).
+        K: ``(3, 3)`` float64 intrinsic matrix (as in ``sensor_msgs/CameraInfo``).
+        D: ``(n,)`` float64 distortion coefficients (may be empty).
+        distortion_model: name of the distortion model (``'plumb_bob'``, ``'none'``...).
+        frame_id: the camera's optical frame id.
+    """
+
+    kind: str
+    width: int
+    height: int
+    K: np.ndarray
+    D: np.ndarray
+    distortion_model: str
+    frame_id: str
+
+    def __post_init__(self) -> None:
+        if self.kind not in CAMERA_KINDS:
+            raise LandmarkDbError(
+                f'camera kind must be one of {", ".join(CAMERA_KINDS)}, got {self.kind!r}')
+        _set(self, 'width', _positive_int(self.width, 'camera width'))
+        _set(self, 'height', _positive_int(self.height, 'camera height'))
+        _set(self, 'K', _float_array(self.K, 'camera K', (3, 3)))
+        _set(self, 'D', _float_array(self.D, 'camera D', (None,)))
+        _check_str(self.distortion_model, 'camera distortion_model')
+        _check_str(self.frame_id, 'camera frame_id', nonempty=True)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return a JSON-ready dict (``K`` as nested lists, ``D`` as a list)."""
+        return {'kind': self.kind, 'width': self.width, 'height': self.height,
+                'K': self.K.tolist(), 'D': self.D.tolist(),
+                'distortion_model': self.distortion_model, 'frame_id': self.frame_id}
+
+    @staticmethod
+    def from_dict(data: Any) -> CameraIntrinsics:
+        """Build from :meth:`to_dict`'s structure.
+
+        Raises:
+            LandmarkDbError: on a missing or invalid field.
+        """
+        if not isinstance(data, dict):
+            raise LandmarkDbError('camera must be an object')
+        names = [f.name for f in fields(CameraIntrinsics)]
+        missing = [name for name in names if name not in data]
+        if missing:
+            raise LandmarkDbError(f'camera has no {missing[0]!r}')
+        return CameraIntrinsics(**{name: data[name] for name in names})
+
+
+@dataclass(frozen=True, eq=False)
+class BuildInfo(_ArrayEquality):
+    """How the database was built: every parameter needed to reproduce or judge it.
+
+    Attributes:
+        k: features per landmark (>= 1).
+        rho: overlap radius of the decomposition, graph steps (>= 0).
+        sigma: the decomposition's sigma (>= 0, Section 5.5).
+        algorithm: decomposition algorithm name (``'best'``, ``'B2'``...).
+        pose_source: where the sampled poses came from: ``'ground_truth'``, ``'tf'``
+            or ``'estimated'``.
+        source_bag: the exploration bag (path or name as given to the builder).
+        created_utc: ISO 8601 creation time, UTC (see :func:`utc_now_iso`).
+        camera: the camera model and intrinsics.
+        frames: frame ids, keys ``'map'``, ``'base_link'``, ``'camera'`` (str -> str).
+        sift: SIFT settings (JSON-able dict).
+        parameters: every other build parameter (JSON-able dict).
+        decomposition_seconds: wall-clock time of the decomposition (>= 0); reported
+            by the exported decomposition JSON.
+
+    ``frames``, ``sift`` and ``parameters`` are stored as their JSON round trip (tuples
+    become lists, numpy scalars Python numbers), so a database compares equal to
+    itself after writing and reading.
+    """
+
+    k: int
+    rho: int
+    sigma: int
+    algorithm: str
+    pose_source: str
+    source_bag: str
+    created_utc: str
+    camera: CameraIntrinsics
+    frames: dict[str, str]
+    sift: dict[str, Any]
+    parameters: dict[str, Any]
+    decomposition_seconds: float = 0.0
+
+    def __post_init__(self) -> None:
+        _set(self, 'k', _int_at_least(self.k, 'k', 1))
+        _set(self, 'rho', _int_at_least(self.rho, 'rho', 0))
+        _set(self, 'sigma', _int_at_least(self.sigma, 'sigma', 0))
+        _check_str(self.algorithm, 'algorithm', nonempty=True)
+        if self.pose_source not in POSE_SOURCES:
+            raise LandmarkDbError(f'pose_source must be one of {", ".join(POSE_SOURCES)}, '
+                                  f'got {self.pose_source!r}')
+        _check_str(self.source_bag, 'source_bag')
+        _check_utc(self.created_utc)
+        if not isinstance(self.camera, CameraIntrinsics):
+            raise LandmarkDbError(
+                f'camera must be a CameraIntrinsics, got {type(self.camera).__name__}')
+        frames = _json_dict(self.frames, 'frames')
+        bad = [key for key, value in frames.items() if not isinstance(value, str)]
+        if bad:
+            raise LandmarkDbError(f'frames[{bad[0]!r}] must be a frame id string, '
+                                  f'got {frames[bad[0]]!r}')
+        _set(self, 'frames', frames)
+        _set(self, 'sift', _json_dict(self.sift, 'sift'))
+        _set(self, 'parameters', _json_dict(self.parameters, 'parameters'))
+        seconds = self.decomposition_seconds
+        if (isinstance(seconds, bool) or not isinstance(seconds, (int, float, np.number))
+                or not math.isfinite(seconds) or seconds < 0):
+            raise LandmarkDbError(
+                f'decomposition_seconds must be a non-negative number, got {seconds!r}')
+        _set(self, 'decomposition_seconds', float(seconds))
+
+
+@dataclass(frozen=True, eq=False)
+class SampledPoses(_ArrayEquality):
+    """The sampled poses V and the pose graph G (Definition 3.1).
+
+    Attributes:
+        xy: ``(n, 2)`` float64 positions of ``base_link`` in ``map``, metres.
+        yaw: ``(n,)`` float64 headings, radians.
+        grid: ``(n, 2)`` int64 grid cell ``(ix, iy)`` of each pose, ``(-1, -1)`` when
+            the pose is not on the sampling grid.
+        edges: ``(m, 2)`` int64 pose index pairs, the undirected graph G.
+        spacing: grid spacing, metres, or None when the poses are not on a grid.
+    """
+
+    xy: np.ndarray
+    yaw: np.ndarray
+    grid: np.ndarray
+    edges: np.ndarray
+    spacing: float | None = None
+
+    def __post_init__(self) -> None:
+        xy = _float_array(self.xy, 'poses xy', (None, 2))
+        n = xy.shape[0]
+        _set(self, 'xy', xy)
+        _set(self, 'yaw', _float_array(self.yaw, 'poses yaw', (n,)))
+        grid = _int_array(self.grid, 'poses grid', (n, 2))
+        off = grid < 0
+        if np.any(grid < -1) or np.any(off[:, 0] != off[:, 1]):
+            bad = int(np.flatnonzero((grid < -1).any(axis=1) | (off[:, 0] != off[:, 1]))[0])
+            raise LandmarkDbError(f'pose {bad} has grid index {grid[bad].tolist()}; '
+                                  f'expected two indices >= 0, or (-1, -1) off the grid')
+        _set(self, 'grid', grid)
+        edges = _int_array(self.edges, 'pose edges', (None, 2))
+        _check_range(edges, n, 'pose edges', 'pose')
+        _set(self, 'edges', edges)
+        if self.spacing is not None:
+            spacing = self.spacing
+            if (isinstance(spacing, bool) or not isinstance(spacing, (int, float, np.number))
+                    or not math.isfinite(spacing) or spacing <= 0):
+                raise LandmarkDbError(f'pose spacing must be a positive number or None, '
+                                      f'got {spacing!r}')
+            _set(self, 'spacing', float(spacing))
+
+    @property
+    def n_poses(self) -> int:
+        """Number of poses."""
+        return int(self.xy.shape[0])
+
+
+@dataclass(frozen=True, eq=False)
+class FeatureClasses(_ArrayEquality):
+    """Scene features (correspondence classes, Section 6.2.1) and who sees them.
+
+    A feature's appearance changes across the region that sees it, so each class keeps
+    a few representative descriptors rather than one.
+
+    Attributes:
+        descriptors: ``(total, 128)`` uint8 SIFT descriptors of all classes, class by
+            class. Integer-valued float input (OpenCV's float32 SIFT) is converted.
+        offsets: ``(n_classes + 1,)`` int64; class ``c`` owns rows
+            ``descriptors[offsets[c]:offsets[c + 1]]`` (at least one each).
+        visibility: ``(n_poses, n_classes)`` bool ``scipy.sparse`` CSR matrix: the
+            classes each pose sees after the filters of Section 6.2.2.
+    """
+
+    descriptors: np.ndarray
+    offsets: np.ndarray
+    visibility: sp.csr_matrix
+
+    def __post_init__(self) -> None:
+        descriptors = _descriptor_array(self.descriptors, 'class descriptors')
+        offsets = _int_array(self.offsets, 'class offsets', (None,))
+        if offsets.size == 0 or offsets[0] != 0 or offsets[-1] != descriptors.shape[0]:
+            raise LandmarkDbError(
+                f'class offsets must run from 0 to the number of descriptors '
+                f'({descriptors.shape[0]}), got '
+                f'{offsets[:1].tolist()}..{offsets[-1:].tolist()}')
+        empty = np.flatnonzero(np.diff(offsets) <= 0)
+        if empty.size:
+            raise LandmarkDbError(f'class {int(empty[0])} has no descriptor (offsets must '
+                                  f'increase strictly)')
+        _set(self, 'descriptors', descriptors)
+        _set(self, 'offsets', offsets)
+        n_classes = offsets.size - 1
+        visibility = _bool_csr(self.visibility, 'class visibility')
+        if visibility.shape[1] != n_classes:
+            raise LandmarkDbError(f'class visibility has {visibility.shape[1]} columns but '
+                                  f'there are {n_classes} classes')
+        _set(self, 'visibility', visibility)
+
+    @property
+    def n_classes(self) -> int:
+        """Number of classes."""
+        return int(self.offsets.size - 1)
+
+    def descriptors_of(self, class_id: int) -> np.ndarray:
+        """Return the ``(d, 128)`` uint8 representative descriptors of one class."""
+        return self.descriptors[self.offsets[class_id]:self.offsets[class_id + 1]]
+
+    @property
+    def descriptor_classes(self) -> np.ndarray:
+        """``(total,)`` int64 class id of every descriptor row (for a matcher index)."""
+        return np.repeat(np.arange(self.n_classes, dtype=np.int64), np.diff(self.offsets))
+
+
+@dataclass(frozen=True, eq=False)
+class ModelView(_ArrayEquality):
+    """One model view of a region: an exploration image and its features (Section 7.2).
+
+    Attributes:
+        pose: index of the sampled pose the image belongs to.
+        image_stamp_ns: the image's header stamp, nanoseconds.
+        image_index: index of the image in the source bag's image topic.
+        x: camera position in ``map``, metres.
+        y: camera position in ``map``, metres.
+        yaw: camera heading in ``map``, radians.
+        class_ids: ``(m,)`` int64 class of each feature; every landmark and extra
+            feature of the region that the image shows, and possibly more features of
+            the image for the symmetry check of Section 6.2.1, which may belong to no
+            class (id ``-1``). Ids >= 0 are distinct (local uniqueness, eq. 6.3).
+        keypoints: ``(m, 2)`` float32 pixel coordinates (x right, y down).
+        descriptors: ``(m, 128)`` uint8 SIFT descriptors in this image.
+    """
+
+    pose: int
+    image_stamp_ns: int
+    image_index: int
+    x: float
+    y: float
+    yaw: float
+    class_ids: np.ndarray
+    keypoints: np.ndarray
+    descriptors: np.ndarray
+
+    def __post_init__(self) -> None:
+        _set(self, 'pose', _int_at_least(self.pose, 'model view pose', 0))
+        _set(self, 'image_stamp_ns', _int_at_least(self.image_stamp_ns,
+                                                   'model view image_stamp_ns', 0))
+        _set(self, 'image_index', _int_at_least(self.image_index,
+                                                'model view image_index', 0))
+        for name in ('x', 'y', 'yaw'):
+            value = getattr(self, name)
+            if (isinstance(value, bool) or not isinstance(value, (int, float, np.number))
+                    or not math.isfinite(value)):
+                raise LandmarkDbError(f'model view {name} must be a finite number, '
+                                      f'got {value!r}')
+            _set(self, name, float(value))
+        class_ids = _int_array(self.class_ids, 'model view class_ids', (None,))
+        m = class_ids.size
+        if np.any(class_ids < -1):
+            raise LandmarkDbError(f'model view class id {int(class_ids.min())} is invalid '
+                                  f'(ids are >= 0, or -1 for a feature of no class)')
+        known = class_ids[class_ids >= 0]
+        if np.unique(known).size != known.size:
+            raise LandmarkDbError('model view lists a class twice (eq. 6.3: one image '
+                                  'feature per class)')
+        _set(self, 'class_ids', class_ids)
+        keypoints = _float_array(self.keypoints, 'model view keypoints', (m, 2))
+        _set(self, 'keypoints', _readonly(keypoints.astype(np.float32)))
+        descriptors = _descriptor_array(self.descriptors, 'model view descriptors')
+        if descriptors.shape[0] != m:
+            raise LandmarkDbError(f'model view has {m} class ids but '
+                                  f'{descriptors.shape[0]} descriptors')
+        _set(self, 'descriptors', descriptors)
+
+    def __len__(self) -> int:
+        return int(self.class_ids.size)
+
+
+@dataclass(frozen=True, eq=False)
+class RegionRecord(_ArrayEquality):
+    """One region: its poses, its landmark, extra features and model views.
+
+    Attributes:
+        poses: ``(p,)`` int64 pose indices, sorted and distinct (input is sorted).
+        landmark: ``(k,)`` int64 class ids of the region's landmark, distinct, in the
+            builder's order (the decomposition's ``features``).
+        extra: ``(e,)`` int64 more class ids the region's poses see, distinct and not
+            in ``landmark``; they vote for the region too (Section 7.1).
+        model_views: the region's model views (the builder picks two at the extremes
+            with the largest baseline and, where possible, a third off their line); at
+            least one, each holding every landmark feature.
+    """
+
+    poses: np.ndarray
+    landmark: np.ndarray
+    extra: np.ndarray
+    model_views: tuple[ModelView, ...]
+
+    def __post_init__(self) -> None:
+        raw = _int_array(self.poses, 'region poses', (None,))
+        poses = np.unique(raw)
+        if poses.size != raw.size:
+            raise LandmarkDbError('region lists a pose twice')
+        if poses.size == 0:
+            raise LandmarkDbError('region has no poses')
+        _set(self, 'poses', _readonly(poses))
+        landmark = _int_array(self.landmark, 'region landmark', (None,))
+        extra = _int_array(self.extra, 'region extra', (None,))
+        for name, ids in (('landmark', landmark), ('extra', extra)):
+            if np.unique(ids).size != ids.size:
+                raise LandmarkDbError(f'region {name} lists a class twice')
+            if np.any(ids < 0):
+                raise LandmarkDbError(f'region {name} has a negative class id')
+        if landmark.size == 0:
+            raise LandmarkDbError('region has an empty landmark')
+        both = np.intersect1d(landmark, extra)
+        if both.size:
+            raise LandmarkDbError(f'class {int(both[0])} is both a landmark and an extra '
+                                  f'feature of the region')
+        _set(self, 'landmark', landmark)
+        _set(self, 'extra', extra)
+        views = tuple(self.model_views)
+        if not views:
+            raise LandmarkDbError('region has no model view')
+        for i, view in enumerate(views):
+            if not isinstance(view, ModelView):
+                raise LandmarkDbError(f'model view {i} is a {type(view).__name__}, '
+                                      f'not a ModelView')
+            absent = np.setdiff1d(landmark, view.class_ids)
+            if absent.size:
+                raise LandmarkDbError(f'model view {i} (image {view.image_index}) lacks '
+                                      f'landmark class {int(absent[0])}')
+        _set(self, 'model_views', views)
+
+    @property
+    def features(self) -> np.ndarray:
+        """``(k + e,)`` int64 landmark then extra class ids: the classes voting for it."""
+        return np.concatenate([self.landmark, self.extra])
+
+
+@dataclass(frozen=True, eq=False)
+class RegionAdjacency(_ArrayEquality):
+    """The region graph used for switching regions (Section 7.1).
+
+    Two regions are neighbours when they share poses (they overlap) or when an edge of
+    the pose graph G joins a pose of one to a pose of the other.
+
+    Attributes:
+        pairs: ``(q, 2)`` int64 region pairs ``(a, b)``, ``a < b``, sorted.
+        shared_poses: ``(q,)`` int64 number of poses in both regions.
+        joining_edges: ``(q,)`` int64 number of ordered pose pairs ``(u, v)``, ``u``
+            in ``a`` and ``v`` in ``b``, that are edges of G (edges inside the overlap
+            count too).
+    """
+
+    pairs: np.ndarray
+    shared_poses: np.ndarray
+    joining_edges: np.ndarray
+
+    def __post_init__(self) -> None:
+        pairs = _int_array(self.pairs, 'adjacency pairs', (None, 2))
+        q = pairs.shape[0]
+        _set(self, 'pairs', pairs)
+        _set(self, 'shared_poses', _int_array(self.shared_poses, 'shared_poses', (q,)))
+        _set(self, 'joining_edges', _int_array(self.joining_edges, 'joining_edges', (q,)))
+
+    def neighbours(self, region: int) -> np.ndarray:
+        """Return the sorted region ids adjacent to ``region``."""
+        a, b = self.pairs[:, 0], self.pairs[:, 1]
+        return np.sort(np.concatenate([b[a == region], a[b == region]]))
+
+
+@dataclass(frozen=True, eq=False)
+class LandmarkDatabase(_ArrayEquality):
+    """A whole landmark database.
+
+    Attributes:
+        info: build parameters.
+        poses: the sampled poses and pose graph.
+        classes: feature classes, their descriptors and visibility.
+        regions: the regions, region ``r`` is ``regions[r]``.
+        uncovered: ``(u,)`` int64 sorted k-coverable poses no region covers (the
+            decomposition's ``uncovered``).
+
+    Derived (computed from the above, never stored twice): :attr:`membership`,
+    :attr:`adjacency`, :meth:`to_world_instance`, :meth:`to_decomposition`.
+
+    Raises:
+        LandmarkDbError: when an index is out of range (a region pose, a class id, a
+            model view pose) or the parts disagree on the number of poses.
+    """
+
+    info: BuildInfo
+    poses: SampledPoses
+    classes: FeatureClasses
+    regions: tuple[RegionRecord, ...]
+    uncovered: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name, kind in (('info', BuildInfo), ('poses', SampledPoses),
+                           ('classes', FeatureClasses)):
+            if not isinstance(getattr(self, name), kind):
+                raise LandmarkDbError(f'{name} must be a {kind.__name__}, '
+                                      f'got {type(getattr(self, name)).__name__}')
+        n, c = self.poses.n_poses, self.classes.n_classes
+        if self.classes.visibility.shape[0] != n:
+            raise LandmarkDbError(f'class visibility has {self.classes.visibility.shape[0]} '
+                                  f'rows but there are {n} poses')
+        regions = tuple(self.regions)
+        for r, region in enumerate(regions):
+            if not isinstance(region, RegionRecord):
+                raise LandmarkDbError(f'region {r} is a {type(region).__name__}, '
+                                      f'not a RegionRecord')
+            if region.poses[-1] >= n:
+                raise LandmarkDbError(f'region {r} has pose {int(region.poses[-1])} out of '
+                                      f'range (there are {n} poses)')
+            ids = region.features
+            if ids.size and ids.max() >= c:
+                raise LandmarkDbError(f'region {r} has class {int(ids.max())} out of range '
+                                      f'(there are {c} classes)')
+            for i, view in enumerate(region.model_views):
+                if view.pose >= n:
+                    raise LandmarkDbError(f'region {r} model view {i} has pose {view.pose} '
+                                          f'out of range (there are {n} poses)')
+                if view.class_ids.size and view.class_ids.max() >= c:
+                    raise LandmarkDbError(
+                        f'region {r} model view {i} has class {int(view.class_ids.max())} '
+                        f'out of range (there are {c} classes)')
+        _set(self, 'regions', regions)
+        raw = _int_array(self.uncovered, 'uncovered', (None,))
+        uncovered = np.unique(raw)
+        if uncovered.size != raw.size:
+            raise LandmarkDbError('uncovered lists a pose twice')
+        _check_range(uncovered, n, 'uncovered', 'pose')
+        _set(self, 'uncovered', _readonly(uncovered))
+
+    @property
+    def n_poses(self) -> int:
+        """Number of sampled poses."""
+        return self.poses.n_poses
+
+    @property
+    def n_classes(self) -> int:
+        """Number of feature classes."""
+        return self.classes.n_classes
+
+    @property
+    def n_regions(self) -> int:
+        """Number of regions."""
+        return len(self.regions)
+
+    @cached_property
+    def region_poses(self) -> sp.csr_matrix:
+        """``(n_regions, n_poses)`` bool CSR: which poses each region holds."""
+        return _incidence([r.poses for r in self.regions], self.n_poses)
+
+    @cached_property
+    def membership(self) -> sp.csr_matrix:
+        """``(n_classes, n_regions)`` bool CSR: the regions each class votes for.
+
+        A class is a member of a region when it is one of the region's landmark or
+        extra features (Sections 3.1.4, 7.1); row ``c`` lists the regions for class c.
+        """
+        return _incidence([r.features for r in self.regions], self.n_classes).T.tocsr()
+
+    @cached_property
+    def adjacency(self) -> RegionAdjacency:
+        """The region graph: regions sharing poses or joined by an edge of G."""
+        members = self.region_poses.astype(np.int64)
+        shared = (members @ members.T).tocoo()
+        pose_graph = adjacency_matrix(self.poses.edges, self.n_poses).astype(np.int64)
+        joining = (members @ pose_graph @ members.T).tocoo()
+        n = self.n_regions
+        rows = np.concatenate([shared.row, joining.row]).astype(np.int64)
+        cols = np.concatenate([shared.col, joining.col]).astype(np.int64)
+        keep = rows < cols
+        keys = np.unique(rows[keep] * max(n, 1) + cols[keep])
+        pairs = np.column_stack([keys // max(n, 1), keys % max(n, 1)]).astype(np.int64)
+        shared_csr = shared.tocsr()
+        joining_csr = joining.tocsr()
+        if keys.size:
+            shared_count = np.asarray(shared_csr[pairs[:, 0], pairs[:, 1]]).reshape(-1)
+            joining_count = np.asarray(joining_csr[pairs[:, 0], pairs[:, 1]]).reshape(-1)
+        else:
+            shared_count = joining_count = np.zeros(0, dtype=np.int64)
+        return RegionAdjacency(pairs.reshape(-1, 2), shared_count.astype(np.int64),
+                               joining_count.astype(np.int64))
+
+    def to_world_instance(self) -> WorldInstance:
+        """Return the world instance: poses, G, and feature id ``c`` = class ``c``."""
+        name = Path(self.info.source_bag).name if self.info.source_bag else ''
+        return WorldInstance.from_visibility(
+            self.poses.xy, self.poses.edges, self.classes.visibility,
+            feature_ids=np.arange(self.n_classes, dtype=np.int64),
+            spacing=self.poses.spacing, name=name)
+
+    def to_decomposition(self) -> Decomposition:
+        """Return the decomposition record (region landmarks as feature ids = class ids)."""
+        regions = [Region(region.poses.copy(), np.sort(region.landmark))
+                   for region in self.regions]
+        info = self.info
+        return Decomposition(info.algorithm, info.k, info.rho, info.sigma,
+                             info.decomposition_seconds, regions, self.uncovered.copy())
+
+
+# --- validation helpers -------------------------------------------------------------
+
+
+def _set(obj: object, name: str, value: Any) -> None:
+    object.__setattr__(obj, name, value)
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array
+
+
+def _values_equal(a: Any, b: Any) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
+                and a.dtype == b.dtype and a.shape == b.shape and bool(np.array_equal(a, b)))
+    if sp.issparse(a) or sp.issparse(b):
+        return (sp.issparse(a) and sp.issparse(b) and a.shape == b.shape
+                and (a != b).nnz == 0)
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(_values_equal(x, y) for x, y in zip(a, b))
+    return bool(a == b)
+
+
+def _check_str(value: Any, name: str, nonempty: bool = False) -> None:
+    if not isinstance(value, str) or (nonempty and not value):
+        raise LandmarkDbError(f'{name} must be a {"non-empty " if nonempty else ""}string, '
+                              f'got {value!r}')
+
+
+def _int_at_least(value: Any, name: str, least: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise LandmarkDbError(f'{name} must be an integer >= {least}, got {value!r}')
+    return int(value)
+
+
+def _positive_int(value: Any, name: str) -> int:
+    return _int_at_least(value, name, 1)
+
+
+def _check_utc(value: Any) -> None:
+    _check_str(value, 'created_utc', nonempty=True)
+    try:
+        moment = datetime.fromisoformat(value)
+    except ValueError:
+        raise LandmarkDbError(f'created_utc must be an ISO 8601 time, got {value!r}') from None
+    if moment.tzinfo is not None and moment.utcoffset() != timedelta(0):
+        raise LandmarkDbError(f'created_utc must be in UTC, got {value!r}')
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f'{type(value).__name__} is not JSON-serialisable')
+
+
+def _json_dict(value: Any, name: str) -> dict[str, Any]:
+    if not isinstance(value, dict):
+        raise LandmarkDbError(f'{name} must be a dict, got {type(value).__name__}')
+    try:
+        text = json.dumps(value, default=_json_default, allow_nan=False, sort_keys=True)
+    except (TypeError, ValueError) as error:
+        raise LandmarkDbError(f'{name} must be JSON-serialisable: {error}') from None
+    return json.loads(text)
+
+
+def _shape_ok(shape: tuple[int, ...], expected: tuple[int | None, ...]) -> bool:
+    return len(shape) == len(expected) and all(
+        want is None or got == want for got, want in zip(shape, expected))
+
+
+def _shape_text(expected: tuple[int | None, ...]) -> str:
+    return '(' + ', '.join('n' if s is None else str(s) for s in expected) + \
+        (',)' if len(expected) == 1 else ')')
+
+
+def _numeric(value: Any, name: str) -> np.ndarray:
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        raise LandmarkDbError(f'{name} must be a numeric array') from None
+    if array.size and (array.dtype == bool or array.dtype.kind not in 'iuf'):
+        raise LandmarkDbError(f'{name} must be a numeric array, got dtype {array.dtype}')
+    return array
+
+
+def _float_array(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    array = _numeric(value, name)
+    if array.size == 0:
+        array = array.reshape([0 if s is None else s for s in shape])
+    if not _shape_ok(array.shape, shape):
+        raise LandmarkDbError(f'{name} must have shape {_shape_text(shape)}, '
+                              f'got {array.shape}')
+    array = np.array(array, dtype=np.float64)
+    if not np.all(np.isfinite(array)):
+        raise LandmarkDbError(f'{name} holds a non-finite number')
+    return _readonly(array)
+
+
+def _int_array(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    array = _numeric(value, name)
+    if array.size == 0:
+        array = np.zeros([0 if s is None else s for s in shape], dtype=np.int64)
+    if not _shape_ok(array.shape, shape):
+        raise LandmarkDbError(f'{name} must have shape {_shape_text(shape)}, '
+                              f'got {array.shape}')
+    if array.dtype.kind == 'f':
+        raise LandmarkDbError(f'{name} must hold integers, got dtype {array.dtype}')
+    if array.dtype.kind == 'u' and array.size and array.max() > np.iinfo(np.int64).max:
+        raise LandmarkDbError(f'{name} holds an integer beyond int64')
+    return _readonly(np.array(array, dtype=np.int64))
+
+
+def _descriptor_array(value: Any, name: str) -> np.ndarray:
+    array = _numeric(value, name)
+    if array.size == 0:
+        array = np.zeros((0, DESCRIPTOR_SIZE), dtype=np.uint8)
+    if array.ndim != 2 or array.shape[1] != DESCRIPTOR_SIZE:
+        raise LandmarkDbError(f'{name} must have shape (n, {DESCRIPTOR_SIZE}), '
+                              f'got {array.shape}')
+    if array.dtype != np.uint8:
+        if not (np.all(np.isfinite(array)) and np.all(array == np.round(array))
+                and array.min(initial=0) >= 0 and array.max(initial=0) <= 255):
+            raise LandmarkDbError(f'{name} must hold integers 0..255 (SIFT descriptors), '
+                                  f'got values outside that')
+    return _readonly(np.array(array, dtype=np.uint8))
+
+
+def _bool_csr(value: Any, name: str) -> sp.csr_matrix:
+    if sp.issparse(value):
+        matrix = sp.csr_matrix(value, dtype=bool, copy=True)
+    else:
+        dense = np.asarray(value)
+        if dense.ndim != 2:
+            raise LandmarkDbError(f'{name} must be a 2-D matrix, got shape {dense.shape}')
+        matrix = sp.csr_matrix(dense.astype(bool))
+    matrix.sum_duplicates()
+    matrix.eliminate_zeros()
+    matrix.sort_indices()
+    return matrix
+
+
+def _check_range(array: np.ndarray, n: int, name: str, what: str) -> None:
+    if array.size and (array.min() < 0 or array.max() >= n):
+        bad = int(array[(array < 0) | (array >= n)][0])
+        raise LandmarkDbError(f'{name}: {what} index {bad} out of range (there are {n})')
+
+
+def _incidence(rows: list[np.ndarray], n_columns: int) -> sp.csr_matrix:
+    """``(len(rows), n_columns)`` bool CSR with row ``i`` set at ``rows[i]``."""
+    lengths = np.array([row.size for row in rows], dtype=np.int64)
+    indptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    indices = np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, np.int64)
+    matrix = sp.csr_matrix((np.ones(indices.size, dtype=bool), indices, indptr),
+                           shape=(len(rows), n_columns))
+    matrix.sum_duplicates()
+    matrix.sort_indices()
+    return matrix

@@ -1,0 +1,499 @@
+"""Writing and reading the landmark database file (SQLite, schema in :mod:`.schema`).
+
+Writing never leaves a half-written file and never touches the previous database: the
+whole database is built in ONE transaction in an in-memory SQLite database, its image
+(``Connection.serialize``) is written to a hidden temporary sibling of the target by
+:func:`landmark_db.atomic.atomic_output`, fsynced and renamed into place, and the
+folder is fsynced. A crash or ``kill -9`` while the tables are filled (nearly all of a
+write) leaves nothing on disk; only one during the final copy of the finished image
+(a fraction of a second) can leave a hidden ``.NAME.*.tmp`` file beside the untouched
+previous database.
+
+Reading opens the file read-only (``file:...?mode=ro``) and refuses, with one
+``LandmarkDbError`` line naming the path and the problem, a missing file, a file that
+is not SQLite, a truncated or damaged file (``PRAGMA quick_check``), a SQLite file of
+another application (``PRAGMA application_id``), a schema version newer than
+:data:`~.schema.SCHEMA_VERSION`, a missing table, and contents that break the
+invariants of :mod:`.model` or disagree with themselves (counts, the stored region
+graph). Opening never modifies the file.
+"""
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field, fields
+import json
+import logging
+import os
+from pathlib import Path
+import sqlite3
+import time
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from landmark_db.atomic import atomic_output
+from landmark_db.database.model import (
+    DESCRIPTOR_SIZE,
+    BuildInfo,
+    CameraIntrinsics,
+    FeatureClasses,
+    LandmarkDatabase,
+    ModelView,
+    RegionAdjacency,
+    RegionRecord,
+    SampledPoses,
+)
+from landmark_db.database.schema import (
+    APPLICATION_ID,
+    APPLICATION_NAME,
+    REQUIRED_TABLES,
+    SCHEMA_SQL,
+    SCHEMA_VERSION,
+)
+from landmark_db.errors import LandmarkDbError
+
+__all__ = ['DatabaseSummary', 'database_image', 'database_summary', 'open_database',
+           'write_database']
+
+_LOG = logging.getLogger(__name__)
+
+_SQLITE_MAGIC = b'SQLite format 3\x00'
+_INFO_FIELDS = tuple(f.name for f in fields(BuildInfo))
+
+
+# --- writing ------------------------------------------------------------------------
+
+
+def write_database(path: str | Path, db: LandmarkDatabase) -> None:
+    """Write ``db`` to the SQLite file ``path``, atomically.
+
+    Args:
+        path: the database file; a previous file there is replaced only once the new
+            one is complete and on disk.
+        db: the database.
+
+    Raises:
+        LandmarkDbError: ``db`` is not a :class:`LandmarkDatabase`, the output folder
+            is missing or not writable, or SQLite fails.
+    """
+    if not isinstance(db, LandmarkDatabase):
+        raise LandmarkDbError(f'write_database needs a LandmarkDatabase, '
+                              f'got {type(db).__name__}')
+    start = time.perf_counter()
+    image = database_image(db)
+    with atomic_output(path) as temporary:
+        with open(temporary, 'wb') as stream:
+            stream.write(image)
+    _LOG.info('wrote %s: %d regions, %d classes, %d poses, %.1f MB in %.2f s', path,
+              db.n_regions, db.n_classes, db.n_poses, len(image) / 1e6,
+              time.perf_counter() - start)
+
+
+def database_image(db: LandmarkDatabase) -> bytes:
+    """Return the bytes of the SQLite file holding ``db`` (built in memory).
+
+    Raises:
+        LandmarkDbError: if SQLite fails.
+    """
+    connection = sqlite3.connect(':memory:', isolation_level=None)
+    try:
+        connection.execute('PRAGMA foreign_keys = OFF')
+        connection.execute('BEGIN')
+        for statement in SCHEMA_SQL.split(';'):
+            if statement.strip():
+                connection.execute(statement)
+        connection.execute(f'PRAGMA application_id = {APPLICATION_ID}')
+        connection.execute(f'PRAGMA user_version = {SCHEMA_VERSION}')
+        _insert_all(connection, db)
+        connection.execute('COMMIT')
+        return connection.serialize()
+    except sqlite3.Error as error:
+        raise LandmarkDbError(f'cannot build the database: {error}') from None
+    finally:
+        connection.close()
+
+
+def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
+    from landmark_db import __version__
+
+    connection.executemany('INSERT INTO meta VALUES (?, ?)', [
+        ('schema_version', str(SCHEMA_VERSION)),
+        ('application', APPLICATION_NAME),
+        ('writer', f'landmark_db {__version__}'),
+    ])
+    _insert_build_parameters(connection, db)
+    _insert_poses(connection, db.poses)
+    _insert_classes(connection, db.classes)
+    _insert_regions(connection, db)
+
+
+def _insert_build_parameters(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
+    info = db.info
+    values = {name: getattr(info, name) for name in _INFO_FIELDS}
+    values['camera'] = info.camera.to_dict()
+    values['pose_spacing'] = db.poses.spacing
+    connection.executemany('INSERT INTO build_parameters VALUES (?, ?)',
+                           [(key, json.dumps(value, sort_keys=True, allow_nan=False))
+                            for key, value in values.items()])
+
+
+def _insert_poses(connection: sqlite3.Connection, poses: SampledPoses) -> None:
+    rows = zip(range(poses.n_poses), poses.xy[:, 0].tolist(), poses.xy[:, 1].tolist(),
+               poses.yaw.tolist(), poses.grid[:, 0].tolist(), poses.grid[:, 1].tolist())
+    connection.executemany('INSERT INTO poses VALUES (?, ?, ?, ?, ?, ?)', rows)
+    connection.executemany('INSERT INTO edges VALUES (?, ?, ?)',
+                           zip(range(poses.edges.shape[0]), poses.edges[:, 0].tolist(),
+                               poses.edges[:, 1].tolist()))
+
+
+def _insert_classes(connection: sqlite3.Connection, classes: FeatureClasses) -> None:
+    visibility = classes.visibility
+    seen_by = np.bincount(visibility.indices, minlength=classes.n_classes)
+    connection.executemany('INSERT INTO classes VALUES (?, ?, ?)',
+                           zip(range(classes.n_classes), np.diff(classes.offsets).tolist(),
+                               seen_by.tolist()))
+    owners = classes.descriptor_classes
+    ordinals = np.arange(owners.size) - classes.offsets[owners]
+    blobs = (row.tobytes() for row in classes.descriptors)
+    connection.executemany('INSERT INTO class_descriptors VALUES (?, ?, ?)',
+                           zip(owners.tolist(), ordinals.tolist(), blobs))
+    pose_of = np.repeat(np.arange(visibility.shape[0]), np.diff(visibility.indptr))
+    connection.executemany('INSERT INTO visibility VALUES (?, ?)',
+                           zip(pose_of.tolist(), visibility.indices.tolist()))
+
+
+def _insert_regions(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
+    view_id = 0
+    for r, region in enumerate(db.regions):
+        connection.execute('INSERT INTO regions VALUES (?, ?, ?, ?, ?)',
+                           (r, region.poses.size, region.landmark.size, region.extra.size,
+                            len(region.model_views)))
+        connection.executemany('INSERT INTO region_poses VALUES (?, ?)',
+                               ((r, pose) for pose in region.poses.tolist()))
+        connection.executemany(
+            'INSERT INTO region_features VALUES (?, ?, ?, ?)',
+            [(r, c, 'landmark', i) for i, c in enumerate(region.landmark.tolist())]
+            + [(r, c, 'extra', i) for i, c in enumerate(region.extra.tolist())])
+        for ordinal, view in enumerate(region.model_views):
+            connection.execute(
+                'INSERT INTO model_views VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)',
+                (view_id, r, ordinal, view.pose, view.image_stamp_ns, view.image_index,
+                 view.x, view.y, view.yaw, len(view)))
+            connection.execute(
+                'INSERT INTO model_view_features VALUES (?, ?, ?, ?)',
+                (view_id, view.class_ids.astype('<i8').tobytes(),
+                 view.keypoints.astype('<f4').tobytes(), view.descriptors.tobytes()))
+            view_id += 1
+    adjacency = db.adjacency
+    connection.executemany(
+        'INSERT INTO region_adjacency VALUES (?, ?, ?, ?)',
+        zip(adjacency.pairs[:, 0].tolist(), adjacency.pairs[:, 1].tolist(),
+            adjacency.shared_poses.tolist(), adjacency.joining_edges.tolist()))
+    connection.executemany('INSERT INTO uncovered VALUES (?)',
+                           ((pose,) for pose in db.uncovered.tolist()))
+
+
+# --- reading ------------------------------------------------------------------------
+
+
+def open_database(path: str | Path) -> LandmarkDatabase:
+    """Open a landmark database read-only, check it and load it whole.
+
+    Args:
+        path: the database file.
+
+    Returns:
+        The database; its :attr:`~LandmarkDatabase.adjacency` equals the stored
+        region graph (checked).
+
+    Raises:
+        LandmarkDbError: one line ``'<path>: <problem>'`` (or ``'database <path> has
+            schema version N, this build reads up to 1: upgrade vbn'``) when the file
+            is missing, not SQLite, truncated, damaged, of another application, of a
+            newer schema, or inconsistent.
+    """
+    start = time.perf_counter()
+    with _checked_connection(path) as connection:
+        try:
+            db, stored_adjacency = _load(connection)
+        except LandmarkDbError as error:
+            raise LandmarkDbError(f'{path}: damaged database: {error}') from None
+        except (sqlite3.Error, ValueError) as error:
+            raise LandmarkDbError(f'{path}: damaged database: {error}') from None
+    if stored_adjacency != db.adjacency:
+        raise LandmarkDbError(f'{path}: damaged database: the stored region graph does '
+                              f'not match the regions')
+    _LOG.debug('opened %s in %.3f s', path, time.perf_counter() - start)
+    return db
+
+
+@dataclass(frozen=True)
+class DatabaseSummary:
+    """What ``vbn db-info`` shows, read without loading the database.
+
+    Attributes:
+        path: the file.
+        file_bytes: the file's size.
+        schema_version: its schema version.
+        counts: rows per kind (``poses``, ``classes``, ``regions``, ...).
+        table_bytes: bytes per table including its indexes (empty when this SQLite
+            lacks the ``dbstat`` table).
+        build: the build parameters (decoded JSON, :class:`BuildInfo` fields plus
+            ``pose_spacing``).
+    """
+
+    path: str
+    file_bytes: int
+    schema_version: int
+    counts: dict[str, int] = field(default_factory=dict)
+    table_bytes: dict[str, int] = field(default_factory=dict)
+    build: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return a JSON-ready dict."""
+        return {'path': self.path, 'file_bytes': self.file_bytes,
+                'schema_version': self.schema_version, 'counts': dict(self.counts),
+                'table_bytes': dict(self.table_bytes), 'build': dict(self.build)}
+
+
+_COUNT_QUERIES = {
+    'poses': 'SELECT COUNT(*) FROM poses',
+    'edges': 'SELECT COUNT(*) FROM edges',
+    'classes': 'SELECT COUNT(*) FROM classes',
+    'class_descriptors': 'SELECT COUNT(*) FROM class_descriptors',
+    'visibility': 'SELECT COUNT(*) FROM visibility',
+    'regions': 'SELECT COUNT(*) FROM regions',
+    'region_poses': 'SELECT COUNT(*) FROM region_poses',
+    'landmark_features': "SELECT COUNT(*) FROM region_features WHERE role = 'landmark'",
+    'extra_features': "SELECT COUNT(*) FROM region_features WHERE role = 'extra'",
+    'model_views': 'SELECT COUNT(*) FROM model_views',
+    'model_view_features': 'SELECT COALESCE(SUM(n_features), 0) FROM model_views',
+    'region_adjacency': 'SELECT COUNT(*) FROM region_adjacency',
+    'uncovered': 'SELECT COUNT(*) FROM uncovered',
+}
+
+
+def database_summary(path: str | Path) -> DatabaseSummary:
+    """Summarise a database (counts, sizes, parameters) after the same checks as opening.
+
+    Only counts and the build parameters are read, so this is fast on big files.
+
+    Raises:
+        LandmarkDbError: as :func:`open_database` for a missing, foreign, newer or
+            damaged file.
+    """
+    with _checked_connection(path) as connection:
+        try:
+            counts = {name: int(connection.execute(sql).fetchone()[0])
+                      for name, sql in _COUNT_QUERIES.items()}
+            build = {key: json.loads(value) for key, value in connection.execute(
+                'SELECT key, value FROM build_parameters ORDER BY key')}
+            table_bytes = _table_bytes(connection)
+        except (sqlite3.Error, ValueError) as error:
+            raise LandmarkDbError(f'{path}: damaged database: {error}') from None
+    return DatabaseSummary(str(path), Path(path).stat().st_size, SCHEMA_VERSION, counts,
+                           table_bytes, build)
+
+
+def _table_bytes(connection: sqlite3.Connection) -> dict[str, int]:
+    """Bytes per table, its indexes included (``dbstat``), or {} without ``dbstat``."""
+    try:
+        rows = connection.execute(
+            'SELECT COALESCE(m.tbl_name, s.name), SUM(s.pgsize) FROM dbstat AS s '
+            'LEFT JOIN sqlite_master AS m ON m.name = s.name '
+            'GROUP BY COALESCE(m.tbl_name, s.name) ORDER BY 1').fetchall()
+    except sqlite3.OperationalError:
+        return {}
+    return {str(name): int(size) for name, size in rows}
+
+
+@contextmanager
+def _checked_connection(path: str | Path) -> Iterator[sqlite3.Connection]:
+    """Open ``path`` read-only after checking that it is a landmark database we read."""
+    target = Path(path)
+    try:
+        with open(target, 'rb') as stream:
+            header = stream.read(100)
+            size = os.fstat(stream.fileno()).st_size
+    except FileNotFoundError:
+        raise LandmarkDbError(f'{path}: no such file') from None
+    except IsADirectoryError:
+        raise LandmarkDbError(f'{path}: is a folder, not a landmark database') from None
+    except OSError as error:
+        raise LandmarkDbError(f'{path}: cannot read ({error.strerror})') from None
+    if not header:
+        raise LandmarkDbError(f'{path}: empty file, not a landmark database')
+    if not header.startswith(_SQLITE_MAGIC):
+        raise LandmarkDbError(f'{path}: not a SQLite database')
+    if len(header) < 100:
+        raise LandmarkDbError(f'{path}: truncated SQLite file ({len(header)} bytes)')
+    uri = target.resolve().as_uri() + '?mode=ro'
+    try:
+        connection = sqlite3.connect(uri, uri=True)
+    except sqlite3.Error as error:
+        raise LandmarkDbError(f'{path}: cannot open ({error})') from None
+    try:
+        _check_file(connection, path, size)
+        yield connection
+    finally:
+        connection.close()
+
+
+def _check_file(connection: sqlite3.Connection, path: str | Path, size: int) -> None:
+    def pragma(name: str) -> Any:
+        return connection.execute(f'PRAGMA {name}').fetchone()[0]
+
+    try:
+        application_id = pragma('application_id')
+        if application_id != APPLICATION_ID:
+            raise LandmarkDbError(
+                f'{path}: not a landmark database (a SQLite file of another application: '
+                f'application_id {application_id:#x}, expected {APPLICATION_ID:#x})')
+        version = pragma('user_version')
+        if version > SCHEMA_VERSION:
+            raise LandmarkDbError(
+                f'database {path} has schema version {version}, this build reads up to '
+                f'{SCHEMA_VERSION}: upgrade vbn')
+        if version < 1:
+            raise LandmarkDbError(f'{path}: invalid schema version {version}')
+        expected = pragma('page_size') * pragma('page_count')
+        if size < expected:
+            raise LandmarkDbError(f'{path}: truncated file ({size} bytes, its header '
+                                  f'says {expected})')
+        problems = [row[0] for row in connection.execute('PRAGMA quick_check(5)')]
+        if problems != ['ok']:
+            raise LandmarkDbError(f'{path}: damaged database ({problems[0]})')
+        tables = {row[0] for row in connection.execute(
+            "SELECT name FROM sqlite_master WHERE type = 'table'")}
+        missing = [name for name in REQUIRED_TABLES if name not in tables]
+        if missing:
+            raise LandmarkDbError(f'{path}: damaged database: table {missing[0]!r} is '
+                                  f'missing')
+        meta = dict(connection.execute('SELECT key, value FROM meta'))
+        if meta.get('application') != APPLICATION_NAME:
+            raise LandmarkDbError(f'{path}: not a landmark database (meta application '
+                                  f'{meta.get("application")!r})')
+        if meta.get('schema_version') != str(version):
+            raise LandmarkDbError(
+                f'{path}: damaged database: meta schema_version '
+                f'{meta.get("schema_version")!r} differs from user_version {version}')
+    except sqlite3.DatabaseError as error:
+        raise LandmarkDbError(f'{path}: damaged or not a SQLite database ({error})') from None
+
+
+def _array(connection: sqlite3.Connection, sql: str, dtype: Any, width: int) -> np.ndarray:
+    rows = connection.execute(sql).fetchall()
+    return np.array(rows, dtype=dtype).reshape(-1, width)
+
+
+def _check_ids(ids: np.ndarray, table: str) -> None:
+    if not np.array_equal(ids, np.arange(ids.size)):
+        raise LandmarkDbError(f'{table} ids are not 0..{ids.size - 1}')
+
+
+def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjacency]:
+    build = {key: json.loads(value) for key, value in
+             connection.execute('SELECT key, value FROM build_parameters')}
+    missing = [name for name in (*_INFO_FIELDS, 'pose_spacing') if name not in build]
+    if missing:
+        raise LandmarkDbError(f'build parameter {missing[0]!r} is missing')
+    info_values = {name: build[name] for name in _INFO_FIELDS}
+    info_values['camera'] = CameraIntrinsics.from_dict(build['camera'])
+    info = BuildInfo(**info_values)
+
+    ints = _array(connection, 'SELECT id, grid_ix, grid_iy FROM poses ORDER BY id',
+                  np.int64, 3)
+    _check_ids(ints[:, 0], 'poses')
+    reals = _array(connection, 'SELECT x, y, yaw FROM poses ORDER BY id', np.float64, 3)
+    edges = _array(connection, 'SELECT id, a, b FROM edges ORDER BY id', np.int64, 3)
+    _check_ids(edges[:, 0], 'edges')
+    poses = SampledPoses(reals[:, :2], reals[:, 2], ints[:, 1:], edges[:, 1:],
+                         build['pose_spacing'])
+    n = poses.n_poses
+
+    counts = _array(connection, 'SELECT id, n_descriptors FROM classes ORDER BY id',
+                    np.int64, 2)
+    _check_ids(counts[:, 0], 'classes')
+    rows = connection.execute('SELECT class_id, descriptor FROM class_descriptors '
+                              'ORDER BY class_id, ordinal').fetchall()
+    owners = np.array([row[0] for row in rows], dtype=np.int64)
+    blobs = [row[1] for row in rows]
+    if any(len(blob) != DESCRIPTOR_SIZE for blob in blobs):
+        raise LandmarkDbError(f'a class descriptor is not {DESCRIPTOR_SIZE} bytes')
+    n_classes = counts.shape[0]
+    if owners.size and (owners.min() < 0 or owners.max() >= n_classes):
+        raise LandmarkDbError('a class descriptor belongs to no class')
+    per_class = np.bincount(owners, minlength=n_classes)
+    if not np.array_equal(per_class, counts[:, 1]):
+        raise LandmarkDbError('class descriptor counts differ from the classes table')
+    descriptors = np.frombuffer(b''.join(blobs), dtype=np.uint8).reshape(-1, DESCRIPTOR_SIZE)
+    offsets = np.concatenate([[0], np.cumsum(per_class)]).astype(np.int64)
+    pairs = _array(connection, 'SELECT pose, class_id FROM visibility', np.int64, 2)
+    if pairs.size and (pairs[:, 0].max() >= n or pairs[:, 1].max() >= n_classes
+                       or pairs.min() < 0):
+        raise LandmarkDbError('visibility holds a pose or class out of range')
+    visibility = sp.csr_matrix((np.ones(pairs.shape[0], dtype=bool),
+                                (pairs[:, 0], pairs[:, 1])), shape=(n, n_classes))
+    classes = FeatureClasses(descriptors, offsets, visibility)
+
+    regions = _load_regions(connection)
+    uncovered = _array(connection, 'SELECT pose FROM uncovered ORDER BY pose', np.int64, 1)
+    db = LandmarkDatabase(info, poses, classes, regions, uncovered[:, 0])
+    stored = _array(connection, 'SELECT region_a, region_b, shared_poses, joining_edges '
+                    'FROM region_adjacency ORDER BY region_a, region_b', np.int64, 4)
+    return db, RegionAdjacency(stored[:, :2], stored[:, 2], stored[:, 3])
+
+
+def _load_regions(connection: sqlite3.Connection) -> tuple[RegionRecord, ...]:
+    table = _array(connection, 'SELECT id, n_poses, n_landmark, n_extra, n_model_views '
+                   'FROM regions ORDER BY id', np.int64, 5)
+    _check_ids(table[:, 0], 'regions')
+    n_regions = table.shape[0]
+    members = _array(connection, 'SELECT region, pose FROM region_poses '
+                     'ORDER BY region, pose', np.int64, 2)
+    features = _array(connection, "SELECT region, role = 'landmark', ordinal, class_id "
+                      'FROM region_features', np.int64, 4)
+    # Per region: landmark (flag 1) first, then extra, each in stored order.
+    features = features[np.lexsort((features[:, 2], -features[:, 1], features[:, 0]))]
+    views = connection.execute(
+        'SELECT v.region, v.pose, v.image_stamp_ns, v.image_index, v.x, v.y, v.yaw, '
+        'v.n_features, f.class_ids, f.keypoints, f.descriptors FROM model_views AS v '
+        'JOIN model_view_features AS f ON f.view = v.id ORDER BY v.region, v.ordinal'
+    ).fetchall()
+    view_regions = np.array([row[0] for row in views], dtype=np.int64)
+    for name, values, expected in (('pose', members[:, 0], table[:, 1]),
+                                   ('feature', features[:, 0], table[:, 2] + table[:, 3]),
+                                   ('model view', view_regions, table[:, 4])):
+        if values.size and (values.min() < 0 or values.max() >= n_regions):
+            raise LandmarkDbError(f'a region {name} belongs to no region')
+        if not np.array_equal(np.bincount(values, minlength=n_regions), expected):
+            raise LandmarkDbError(f'region {name} counts differ from the regions table')
+    pose_bounds = np.searchsorted(members[:, 0], np.arange(n_regions + 1))
+    feature_bounds = np.searchsorted(features[:, 0], np.arange(n_regions + 1))
+    view_bounds = np.searchsorted(view_regions, np.arange(n_regions + 1))
+    regions = []
+    for r in range(n_regions):
+        own = features[feature_bounds[r]:feature_bounds[r + 1]]
+        if int(own[:, 1].sum()) != table[r, 2]:
+            raise LandmarkDbError(f'region {r} landmark count differs from the regions table')
+        model_views = tuple(_model_view(row) for row in
+                            views[view_bounds[r]:view_bounds[r + 1]])
+        regions.append(RegionRecord(members[pose_bounds[r]:pose_bounds[r + 1], 1],
+                                    own[own[:, 1] == 1, 3], own[own[:, 1] == 0, 3],
+                                    model_views))
+    return tuple(regions)
+
+
+def _model_view(row: tuple[Any, ...]) -> ModelView:
+    _, pose, stamp, image_index, x, y, yaw, m, class_blob, keypoint_blob, descriptor_blob \
+        = row
+    if (len(class_blob) != 8 * m or len(keypoint_blob) != 8 * m
+            or len(descriptor_blob) != DESCRIPTOR_SIZE * m):
+        raise LandmarkDbError(f'model view of image {image_index}: feature arrays do not '
+                              f'hold {m} features')
+    return ModelView(pose, stamp, image_index, x, y, yaw,
+                     np.frombuffer(class_blob, dtype='<i8'),
+                     np.frombuffer(keypoint_blob, dtype='<f4').reshape(m, 2),
+                     np.frombuffer(descriptor_blob, dtype=np.uint8).reshape(m, DESCRIPTOR_SIZE))
