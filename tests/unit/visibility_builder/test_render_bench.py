@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from visibility_builder.render.camera import make_camera
+from visibility_builder.geometry.camera import make_camera
 from visibility_builder.render.renderer import Renderer
 from visibility_builder.scenes import resolve_scene
 

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from visibility_builder.render.camera import make_camera
+from visibility_builder.geometry.camera import make_camera
 from visibility_builder.render.effects import ImageEffects, apply_effects
 from visibility_builder.render.renderer import Renderer
 from visibility_builder.render.textures import sample_photographs

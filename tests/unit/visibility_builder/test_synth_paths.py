@@ -9,7 +9,7 @@ import pytest
 from landmark_db.scene import Scene
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.scenes import resolve_scene
-from visibility_builder.synthesis.grid import exploration_poses, wall_clearance
+from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.trajectory import (
     RunParameters,
     kidnapped_trajectory,
@@ -46,15 +46,15 @@ def test_room_grid_is_free_with_clearance(room):
     poses = exploration_poses(room, 0.25)
     assert 150 < len(poses) < 300
     assert room.free_space(poses).all()
-    assert wall_clearance(room, poses).min() >= 0.2 - 1e-9
+    assert room.wall_distance(poses).min() >= 0.2 - 1e-9
     # lattice spacing: every pose has a neighbour 0.25 m away
     d = np.linalg.norm(poses[:, None] - poses[None], axis=2)
     np.fill_diagonal(d, np.inf)
     assert d.min(axis=1) == pytest.approx(0.25)
 
 
-def test_wall_clearance_hand_checked():
-    d = wall_clearance(SQUARE, np.array([[1.0, 0.5], [0.1, 0.5], [1.9, 0.95]]))
+def test_wall_distance_hand_checked():
+    d = SQUARE.wall_distance(np.array([[1.0, 0.5], [0.1, 0.5], [1.9, 0.95]]))
     assert d == pytest.approx([0.5, 0.1, 0.05])
 
 
@@ -72,7 +72,7 @@ def test_run_is_smooth_collision_free_and_within_limits(room, room_run):
     run = room_run
     assert 30 < run.duration < 80
     assert room.free_space(run.poses[:, :2]).all()
-    clearance = wall_clearance(room, run.poses[::5, :2])
+    clearance = room.wall_distance(run.poses[::5, :2])
     assert clearance.min() >= 0.8 * params.clearance
     # a pass near the walls and a pass through the open middle
     assert clearance.min() < 0.6

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     if args.snapshot is not None:
         import cv2
 
-        from visibility_builder.render.camera import make_camera
+        from visibility_builder.geometry.camera import make_camera
         from visibility_builder.render.renderer import Renderer
 
         x, y, yaw_deg = args.snapshot

@@ -7,7 +7,7 @@ drift). :mod:`.messages` converts to ROS 2 messages (rosbags types) and
 """
 from __future__ import annotations
 
-from visibility_builder.synthesis.grid import exploration_poses, wall_clearance
+from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.odometry import (
     OdometryNoise,
     OdometryTrack,
@@ -29,5 +29,4 @@ __all__ = [
     'kidnapped_trajectory',
     'run_trajectory',
     'simulate_odometry',
-    'wall_clearance',
 ]

@@ -44,9 +44,9 @@ import numpy as np
 from landmark_db.scene import Scene
 from visibility_builder.bag_io import BagWriter, default_qos
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.render.camera import make_camera
+from visibility_builder.geometry.camera import make_camera
+from visibility_builder.geometry.frames import compose_poses, invert_pose
 from visibility_builder.render.effects import ImageEffects
-from visibility_builder.render.frames import compose_poses, invert_pose
 from visibility_builder.render.renderer import Renderer
 from visibility_builder.synthesis import messages
 from visibility_builder.synthesis.grid import exploration_poses

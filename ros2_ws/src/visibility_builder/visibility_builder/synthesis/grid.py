@@ -15,27 +15,7 @@ import numpy as np
 from landmark_db.scene import Scene
 from visibility_builder.errors import VisibilityBuilderError
 
-__all__ = ['exploration_poses', 'wall_clearance']
-
-
-def wall_clearance(scene: Scene, points: np.ndarray) -> np.ndarray:
-    """Return each point's distance to the nearest wall segment.
-
-    Args:
-        scene: the scene.
-        points: ``(n, 2)`` points, metres.
-
-    Returns:
-        ``(n,)`` distances, metres.
-    """
-    points = np.asarray(points, dtype=float).reshape(-1, 2)
-    starts, ends, _ = scene.wall_segments()
-    edge = ends - starts  # (s, 2)
-    length2 = np.maximum(np.sum(edge * edge, axis=1), 1e-18)
-    rel = points[:, None, :] - starts[None, :, :]  # (n, s, 2)
-    t = np.clip(np.sum(rel * edge[None], axis=2) / length2[None, :], 0.0, 1.0)
-    closest = starts[None] + t[..., None] * edge[None]
-    return np.min(np.linalg.norm(points[:, None, :] - closest, axis=2), axis=1)
+__all__ = ['exploration_poses']
 
 
 def exploration_poses(scene: Scene, spacing: float, clearance: float = 0.2) -> np.ndarray:
@@ -67,7 +47,7 @@ def exploration_poses(scene: Scene, spacing: float, clearance: float = 0.2) -> n
     gx[1::2] = gx[1::2, ::-1]  # boustrophedon: every other row backwards
     points = np.stack([gx.ravel(), gy.ravel()], axis=1)
     keep = scene.free_space(points)
-    keep[keep] = wall_clearance(scene, points[keep]) >= clearance
+    keep[keep] = scene.wall_distance(points[keep]) >= clearance
     if not np.any(keep):
         raise VisibilityBuilderError(
             f'no free pose at spacing {spacing} m with {clearance} m clearance in the scene')

@@ -7,7 +7,6 @@ optical ``camera`` frame.
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import cv2
@@ -15,8 +14,8 @@ import numpy as np
 
 from visibility_builder.bag_io import TYPESTORE
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.render.camera import CameraInfoFields
-from visibility_builder.render.frames import BASE_TO_CAMERA_QUATERNION
+from visibility_builder.geometry.camera import CameraInfoFields
+from visibility_builder.geometry.frames import BASE_TO_CAMERA_QUATERNION, yaw_quaternion
 
 __all__ = [
     'camera_info_message',
@@ -103,15 +102,11 @@ def _pose(x: float, y: float, z: float, quaternion: tuple[float, ...] | np.ndarr
         orientation=_T['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2], w=q[3]))
 
 
-def _yaw_q(yaw: float) -> tuple[float, float, float, float]:
-    return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
-
-
 def pose_stamped_message(stamp_ns: int, pose: np.ndarray, frame_id: str = 'map') -> Any:
     """Return a ``geometry_msgs/PoseStamped`` for a planar pose ``(x, y, yaw)``."""
     x, y, yaw = (float(v) for v in pose)
     return _T['geometry_msgs/msg/PoseStamped'](header=header(stamp_ns, frame_id),
-                                               pose=_pose(x, y, 0.0, _yaw_q(yaw)))
+                                               pose=_pose(x, y, 0.0, yaw_quaternion(yaw)))
 
 
 def transform(stamp_ns: int, parent: str, child: str, translation: tuple[float, float, float],
@@ -129,7 +124,7 @@ def transform(stamp_ns: int, parent: str, child: str, translation: tuple[float, 
 def planar_transform(stamp_ns: int, parent: str, child: str, pose: np.ndarray) -> Any:
     """Return the transform of a planar pose ``(x, y, yaw)`` of ``child`` in ``parent``."""
     x, y, yaw = (float(v) for v in pose)
-    return transform(stamp_ns, parent, child, (x, y, 0.0), _yaw_q(yaw))
+    return transform(stamp_ns, parent, child, (x, y, 0.0), yaw_quaternion(yaw))
 
 
 def camera_static_transform(stamp_ns: int, camera_height: float) -> Any:
@@ -163,8 +158,8 @@ def odometry_message(stamp_ns: int, pose: np.ndarray, twist: np.ndarray,
     vec = _T['geometry_msgs/msg/Vector3']
     return _T['nav_msgs/msg/Odometry'](
         header=header(stamp_ns, 'odom'), child_frame_id='base_link',
-        pose=_T['geometry_msgs/msg/PoseWithCovariance'](pose=_pose(x, y, 0.0, _yaw_q(yaw)),
-                                                        covariance=pose_cov),
+        pose=_T['geometry_msgs/msg/PoseWithCovariance'](
+            pose=_pose(x, y, 0.0, yaw_quaternion(yaw)), covariance=pose_cov),
         twist=_T['geometry_msgs/msg/TwistWithCovariance'](
             twist=_T['geometry_msgs/msg/Twist'](
                 linear=vec(x=float(twist[0]), y=0.0, z=0.0),

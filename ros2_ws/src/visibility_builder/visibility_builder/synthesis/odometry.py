@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.geometry.frames import wrap_angle
 from visibility_builder.synthesis.trajectory import Trajectory
 
 __all__ = ['OdometryNoise', 'OdometryTrack', 'simulate_odometry']
@@ -118,7 +119,7 @@ def simulate_odometry(trajectory: Trajectory, rate_hz: float = 50.0,
         chord = np.where(np.abs(dtheta) > 1e-9, np.sin(dtheta / 2) / (dtheta / 2), 1.0)
     x = np.concatenate([[0.0], np.cumsum(ds * chord * np.cos(mid))])
     y = np.concatenate([[0.0], np.cumsum(ds * chord * np.sin(mid))])
-    poses = np.stack([x, y, np.mod(theta + math.pi, 2 * math.pi) - math.pi], axis=1)
+    poses = np.stack([x, y, wrap_angle(theta)], axis=1)
     twist = np.concatenate([np.stack([v, w], axis=1), [[v[-1], w[-1]]]]) if steps else (
         np.zeros((1, 2)))
     k_trans, k_rot, k_drift = 0.02, 0.02, 0.005

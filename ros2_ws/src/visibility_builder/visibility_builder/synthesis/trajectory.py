@@ -27,7 +27,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from landmark_db.scene import Scene
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.synthesis.grid import wall_clearance
+from visibility_builder.geometry.frames import wrap_angle
 
 __all__ = ['RunParameters', 'Trajectory', 'kidnapped_trajectory', 'run_trajectory']
 
@@ -99,7 +99,7 @@ class Trajectory:
         jump = np.linalg.norm(self.poses[nxt, :2] - self.poses[index, :2], axis=1) > 0.2
         w[jump] = 0.0  # never interpolate across a teleport
         out = self.poses[index] * (1 - w) + self.poses[nxt] * w
-        out[:, 2] = np.mod(out[:, 2] + math.pi, 2 * math.pi) - math.pi
+        out[:, 2] = wrap_angle(out[:, 2])
         return out
 
 
@@ -112,7 +112,7 @@ def _lattice_graph(scene: Scene, params: RunParameters) -> tuple[np.ndarray, np.
     points = np.stack([gx.ravel(), gy.ravel()], axis=1)
     free = scene.free_space(points)
     clearance = np.zeros(len(points))
-    clearance[free] = wall_clearance(scene, points[free])
+    clearance[free] = scene.wall_distance(points[free])
     ok = free & (clearance >= params.clearance)
     if ok.sum() < 2:
         raise VisibilityBuilderError(
@@ -144,7 +144,7 @@ def _lattice_graph(scene: Scene, params: RunParameters) -> tuple[np.ndarray, np.
 def _waypoints(scene: Scene, nodes: np.ndarray, clearance: np.ndarray,
                params: RunParameters) -> list[int]:
     centroid = nodes.mean(axis=0)
-    outer = wall_clearance(Scene(scene.perimeter), nodes)  # distance to the outer walls
+    outer = Scene(scene.perimeter).wall_distance(nodes)  # distance to the outer walls
     ring = np.flatnonzero(np.abs(outer - params.near_wall) <= params.lattice / 2
                           + 1e-9)
     if ring.size < params.waypoints:
@@ -198,7 +198,7 @@ def _smooth(scene: Scene, path: np.ndarray, params: RunParameters, step: float) 
     while sigma >= 0.5:
         smooth = np.stack([gaussian_filter1d(path[:, k], sigma, mode='nearest')
                            for k in range(2)], axis=1)
-        if (np.all(wall_clearance(scene, smooth) >= params.clearance * 0.8)
+        if (np.all(scene.wall_distance(smooth) >= params.clearance * 0.8)
                 and np.all(scene.free_space(smooth))):
             return smooth
         sigma /= 2.0

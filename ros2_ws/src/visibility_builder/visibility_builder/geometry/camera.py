@@ -1,4 +1,9 @@
-"""Camera models of the renderer: cylindrical panorama and pinhole (thesis Section 7.5).
+"""Camera models: cylindrical panorama and pinhole (thesis Section 7.5).
+
+Shared by the renderer, the builder, image pose estimation and the localizer. Pure
+numpy: :func:`camera_from_info` reads any ``sensor_msgs/CameraInfo``-like object
+(rclpy or rosbags messages, :class:`CameraInfoFields`) by its attributes, without
+importing a message module.
 
 Both models live in the camera's *optical* frame (``camera``, REP 103 optical
 convention): ``z`` forward, ``x`` right, ``y`` down. The robot moves in the plane
@@ -32,12 +37,17 @@ cylinder around the optical centre.
 
 The renderer uses the fact that, for both models, a vertical world line projects
 to one image column: :meth:`column_geometry` gives each column's azimuth and the
-factor that turns horizontal range into the depth that divides ``Y``.
+factor that turns horizontal range into the depth that divides ``Y``. Pixels and
+directions convert both ways: :meth:`~CameraModel.unproject` and
+:meth:`~CameraModel.project` for optical-frame rays and points,
+:meth:`~CameraModel.pixel_to_bearing` and :meth:`~CameraModel.bearing_to_pixel` for
+the robot's planar bearing (counter-clockwise from forward, REP 103) and elevation.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -45,11 +55,15 @@ from visibility_builder.errors import VisibilityBuilderError
 
 __all__ = [
     'CameraInfoFields',
+    'CameraInfoLike',
     'CameraModel',
     'PanoramicCamera',
     'PinholeCamera',
+    'camera_from_info',
     'make_camera',
 ]
+
+_IDENTITY_K_ROW3 = (0.0, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -73,6 +87,20 @@ class CameraInfoFields:
     k: tuple[float, ...]
     r: tuple[float, ...]
     p: tuple[float, ...]
+
+
+class CameraInfoLike(Protocol):
+    """The ``sensor_msgs/CameraInfo`` attributes :func:`camera_from_info` reads.
+
+    rclpy messages, rosbags-deserialized messages and :class:`CameraInfoFields` all
+    have them.
+    """
+
+    width: Any
+    height: Any
+    distortion_model: Any
+    d: Any
+    k: Any
 
 
 class CameraModel:
@@ -134,6 +162,43 @@ class CameraModel:
             points that fall inside the image (and in front of a pinhole camera).
         """
         raise NotImplementedError
+
+    def pixel_to_bearing(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return the planar bearing and the elevation of the rays through pixels.
+
+        Args:
+            uv: ``(n, 2)`` pixel coordinates ``(u, v)``.
+
+        Returns:
+            ``(bearing, elevation)``, ``(n,)`` radians each: ``bearing`` counter-clockwise
+            from the robot's forward axis (``base_link`` ``x``, REP 103; the negated
+            azimuth of :meth:`column_geometry`), in ``(-pi, pi]``; ``elevation`` above
+            the horizon (up is positive).
+        """
+        rays = self.unproject(uv)
+        bearing = np.arctan2(-rays[:, 0], rays[:, 2])
+        elevation = np.arctan2(-rays[:, 1], np.hypot(rays[:, 0], rays[:, 2]))
+        return bearing, elevation
+
+    def bearing_to_pixel(self, bearing: np.ndarray,
+                         elevation: np.ndarray | float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Return the pixels of directions given by bearing and elevation.
+
+        Inverse of :meth:`pixel_to_bearing`.
+
+        Args:
+            bearing: ``(n,)`` radians counter-clockwise from the robot's forward axis.
+            elevation: ``(n,)`` or scalar radians above the horizon.
+
+        Returns:
+            ``(uv, valid)`` as :meth:`project` returns them.
+        """
+        bearing = np.asarray(bearing, dtype=float).reshape(-1)
+        elevation = np.broadcast_to(np.asarray(elevation, dtype=float), bearing.shape)
+        horizontal = np.cos(elevation)
+        rays = np.stack([-np.sin(bearing) * horizontal, -np.sin(elevation),
+                         np.cos(bearing) * horizontal], axis=1)
+        return self.project(rays)
 
     def camera_info(self) -> CameraInfoFields:
         """Return the intrinsics as ``sensor_msgs/CameraInfo`` fields."""
@@ -305,6 +370,83 @@ def make_camera(kind: str, width: int | None = None, height: int | None = None,
     if kind == 'pinhole':
         return PinholeCamera.from_fov(width or 640, height or 480, hfov_deg)
     raise VisibilityBuilderError(f'unknown camera model {kind!r} (expected panoramic or pinhole)')
+
+
+def camera_from_info(info: CameraInfoLike) -> CameraModel:
+    """Build the camera model a ``sensor_msgs/CameraInfo`` describes.
+
+    Reads only the attributes ``width``, ``height``, ``distortion_model``, ``d`` and
+    ``k`` (duck-typed: rclpy and rosbags messages and :class:`CameraInfoFields`).
+    ``'cylindrical'`` gives a :class:`PanoramicCamera` with ``K = [f_az, 0, cx; 0, f_y,
+    y0; 0, 0, 1]``, where ``f_az = width / (2 pi)`` and ``cx = width / 2`` (a full
+    360-degree panorama, forward in the middle column); ``'plumb_bob'`` gives a
+    :class:`PinholeCamera` with ``K = [fx, 0, cx; 0, fy, cy; 0, 0, 1]``. Intrinsics
+    equal to a model's defaults come back as the defaults, so
+    ``camera_from_info(camera.camera_info()) == camera``.
+
+    Args:
+        info: the camera info.
+
+    Returns:
+        The camera model.
+
+    Raises:
+        VisibilityBuilderError: a missing attribute, an unknown distortion model,
+            non-zero distortion (the models are distortion-free: images must be
+            rectified), a malformed ``K``, a panorama that does not span 360 degrees
+            about its middle column, or an invalid image size.
+    """
+    try:
+        width_raw, height_raw = info.width, info.height
+        model, d_raw, k_raw = info.distortion_model, info.d, info.k
+    except AttributeError as exc:
+        raise VisibilityBuilderError(f'camera info lacks a CameraInfo field: {exc}') from None
+    width, height = _image_size(width_raw, height_raw)
+    try:
+        k = np.asarray(k_raw, dtype=float).reshape(-1)
+        d = np.asarray(d_raw, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise VisibilityBuilderError(
+            f'camera info k and d must be numbers, got k={k_raw!r}, d={d_raw!r}') from None
+    if k.size != 9 or not np.all(np.isfinite(k)):
+        raise VisibilityBuilderError(f'camera info k must hold 9 finite numbers, '
+                                     f'got {k.tolist()}')
+    if k[1] != 0.0 or k[3] != 0.0 or tuple(k[6:]) != _IDENTITY_K_ROW3:
+        raise VisibilityBuilderError(f'camera info k must be [f, 0, c; 0, f, c; 0, 0, 1], '
+                                     f'got {k.tolist()}')
+    if np.any(d != 0.0):
+        raise VisibilityBuilderError(f'camera info distortion must be zero (rectified '
+                                     f'images), got d={d.tolist()}')
+    if model == 'cylindrical':
+        camera = PanoramicCamera(width, height)
+        if not (math.isclose(k[0], camera.f_az, rel_tol=1e-6)
+                and math.isclose(k[2], camera.cx, rel_tol=0.0, abs_tol=1e-6 * width)):
+            raise VisibilityBuilderError(
+                f'cylindrical camera info must span 360 degrees about the middle column: '
+                f'expected k[0] = width / (2 pi) = {camera.f_az} and k[2] = {camera.cx}, '
+                f'got {k[0]} and {k[2]}')
+        f_y = None if math.isclose(k[4], camera.f_vertical, rel_tol=1e-12) else float(k[4])
+        y0 = None if math.isclose(k[5], camera.horizon_row, rel_tol=1e-12) else float(k[5])
+        if f_y is not None and not f_y > 0:
+            raise VisibilityBuilderError(f'cylindrical camera info needs f_y = k[4] > 0, '
+                                         f'got {f_y}')
+        return PanoramicCamera(width, height, f_y=f_y, y0=y0)
+    if model == 'plumb_bob':
+        return PinholeCamera(width, height, float(k[0]), float(k[4]), float(k[2]), float(k[5]))
+    raise VisibilityBuilderError(f'unknown camera info distortion_model {model!r} '
+                                 f'(expected cylindrical or plumb_bob)')
+
+
+def _image_size(width: Any, height: Any) -> tuple[int, int]:
+    """Return ``(width, height)`` as ints (message fields may be numpy integers)."""
+    try:
+        size = int(width), int(height)
+    except (TypeError, ValueError):
+        raise VisibilityBuilderError(f'image size must be integers, '
+                                     f'got {width!r} x {height!r}') from None
+    if size != (width, height):
+        raise VisibilityBuilderError(f'image size must be integers, got {width!r} x {height!r}')
+    return size
 
 
 def _check_size(width: int, height: int) -> None:
