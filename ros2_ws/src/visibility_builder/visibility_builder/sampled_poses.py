@@ -1,0 +1,359 @@
+"""Sampled poses and the pose graph G of an exploration (issue 8, step 2).
+
+Thesis Section 6.2.1 assumes "exactly one image per sampling position": images
+taken at one position are integrated into one pose (the Room 408 data set took
+four pinhole images, at headings 0, 90, 180 and 270 degrees, at every position of
+a 25 cm grid; a panoramic exploration takes one). ``G = (V, E)`` is the graph of
+the sampling poses, whose shortest-path distance bounds the pose pairs that
+Algorithm 6.3 compares (its parameter gamma).
+
+Steps:
+
+1. **Positions**: frames whose base positions lie within ``position_tolerance`` of
+   each other (single linkage) form one pose at their mean position. The base
+   position is used, not the camera's: a robot turning in place stays where it is,
+   while a camera mounted off its rotation axis moves on a circle.
+2. **Lattice**: the spacing is the median nearest-neighbour distance; the lattice
+   orientation the circular mean of the nearest-neighbour directions modulo 90
+   degrees; the origin the circular mean of the positions modulo the spacing.
+   Spacing and origin are then refined by least squares on the positions within
+   ``grid_tolerance * spacing`` of a lattice point. A square lattice is assumed
+   (one spacing), as the thesis's grid and the project's exploration bags have.
+3. **Edges**: if at least ``min_grid_fraction`` of the poses lie on the lattice,
+   they are joined to their lattice neighbours (``connectivity`` 4 or 8); a pose
+   off the lattice (``grid`` row ``-1``) is joined to its ``knn`` nearest poses.
+   Otherwise (positions off any grid) ``G`` is the symmetric ``knn``-nearest-
+   neighbour graph, made connected by adding, while it has several components,
+   the shortest edge from the smallest component to the rest: graph distances
+   between the poses are then defined everywhere. A lattice graph is left as it is
+   (a gap in a grid is a wall or an obstacle), with a warning if it falls apart.
+
+Complexity: ``O(n log n)`` (k-d tree queries and sorts) for ``n`` frames.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import logging
+import math
+from typing import Any
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from visibility_builder.errors import VisibilityBuilderError
+
+__all__ = ['PoseSampling', 'SamplingConfig', 'sample_poses']
+
+_LOG = logging.getLogger(__name__)
+
+# Lattice offsets of the neighbours (each undirected edge once).
+_OFFSETS = {4: np.array([[1, 0], [0, 1]]), 8: np.array([[1, 0], [0, 1], [1, 1], [1, -1]])}
+
+
+@dataclass(frozen=True)
+class SamplingConfig:
+    """Parameters of :func:`sample_poses`.
+
+    Attributes:
+        position_tolerance: frames whose positions are this close (metres, single
+            linkage) are one sampled pose.
+        grid_tolerance: largest distance of a pose from its lattice point, as a
+            fraction of the spacing, for it to count as on the lattice.
+        min_grid_fraction: the lattice is used when at least this fraction of the
+            poses lie on it.
+        connectivity: 4 or 8 lattice neighbours.
+        knn: neighbours of each pose in the k-nearest-neighbour graph.
+    """
+
+    position_tolerance: float = 0.02
+    grid_tolerance: float = 0.1
+    min_grid_fraction: float = 0.5
+    connectivity: int = 4
+    knn: int = 6
+
+    def __post_init__(self) -> None:
+        """Reject invalid values with a :class:`VisibilityBuilderError`."""
+        if not (math.isfinite(self.position_tolerance) and self.position_tolerance >= 0):
+            raise VisibilityBuilderError(
+                f'position_tolerance must be a non-negative number, got {self.position_tolerance}')
+        if not 0 < self.grid_tolerance < 0.5:
+            raise VisibilityBuilderError(
+                f'grid_tolerance must be in (0, 0.5), got {self.grid_tolerance}')
+        if not 0 <= self.min_grid_fraction <= 1:
+            raise VisibilityBuilderError(
+                f'min_grid_fraction must be in [0, 1], got {self.min_grid_fraction}')
+        if self.connectivity not in _OFFSETS:
+            raise VisibilityBuilderError(
+                f'connectivity must be 4 or 8, got {self.connectivity}')
+        if int(self.knn) != self.knn or self.knn < 1:
+            raise VisibilityBuilderError(f'knn must be a positive integer, got {self.knn}')
+
+
+@dataclass(frozen=True)
+class PoseSampling:
+    """The sampled poses of an exploration and their graph ``G``.
+
+    Poses are numbered in the order of their first frame.
+
+    Attributes:
+        positions: ``(n, 2)`` position of each pose in ``map`` (mean of its frames'
+            base positions), metres.
+        frames_of_pose: for each pose, the indices of its frames (in frame order).
+        yaw: ``(n,)`` heading of each pose: the camera heading of its first frame
+            (radians; for a panorama, the azimuth of its centre column).
+        grid: ``(n, 2)`` int lattice cell ``(i, j)`` of each pose, ``-1`` off the lattice
+            (all ``-1`` when no lattice was found); the smallest index on each axis is 0.
+        spacing: lattice spacing in metres, ``None`` when no lattice was found.
+        origin: ``(2,)`` position of cell ``(0, 0)``, ``None`` without a lattice.
+        angle: lattice orientation in radians, ``(-pi/4, pi/4]``: cell ``(i, j)`` is at
+            ``origin + spacing * R(angle) @ (i, j)``; ``None`` without a lattice.
+        edges: ``(m, 2)`` int pose pairs ``i < j``, sorted, each once.
+        graph: ``'grid4'``, ``'grid8'`` or ``'knn'``: how the edges were made
+            (``'grid4'``/``'grid8'`` may include k-NN edges of off-lattice poses).
+    """
+
+    positions: np.ndarray
+    frames_of_pose: tuple[tuple[int, ...], ...]
+    yaw: np.ndarray
+    grid: np.ndarray
+    spacing: float | None
+    origin: np.ndarray | None
+    angle: float | None
+    edges: np.ndarray
+    graph: str
+
+    @property
+    def n_poses(self) -> int:
+        """Number of sampled poses."""
+        return len(self.positions)
+
+
+def sample_poses(exploration: Any, config: SamplingConfig | None = None) -> PoseSampling:
+    """Group the frames of an exploration into sampled poses and build the pose graph.
+
+    Args:
+        exploration: an :class:`~visibility_builder.exploration.Exploration` (anything
+            with ``base_poses()`` and ``camera_poses()`` returning ``(n, 3)`` arrays).
+        config: tolerances and graph parameters (default :class:`SamplingConfig`).
+
+    Returns:
+        The poses, their frames, the lattice (if any) and the edges of ``G``.
+
+    Raises:
+        VisibilityBuilderError: no frames, or positions that are not finite.
+
+    Example:
+        >>> class Grid:  # 2 x 2 positions, 25 cm apart, one frame each
+        ...     def base_poses(self):
+        ...         return np.array([[0, 0, 0], [.25, 0, 0], [0, .25, 0], [.25, .25, 0]])
+        ...     camera_poses = base_poses
+        >>> sampling = sample_poses(Grid())
+        >>> round(sampling.spacing, 9), sampling.grid.tolist(), sampling.edges.tolist()
+        (0.25, [[0, 0], [1, 0], [0, 1], [1, 1]], [[0, 1], [0, 2], [1, 3], [2, 3]])
+    """
+    config = config or SamplingConfig()
+    base = np.asarray(exploration.base_poses(), dtype=float).reshape(-1, 3)
+    camera = np.asarray(exploration.camera_poses(), dtype=float).reshape(-1, 3)
+    if len(base) == 0:
+        raise VisibilityBuilderError('no frames to sample poses from')
+    if not np.isfinite(base[:, :2]).all():
+        raise VisibilityBuilderError('frame positions must be finite')
+    labels = _group_positions(base[:, :2], config.position_tolerance)
+    n = int(labels.max()) + 1
+    order = np.argsort(labels, kind='stable')
+    splits = np.flatnonzero(np.diff(labels[order])) + 1
+    frames_of_pose = tuple(tuple(int(i) for i in group) for group in np.split(order, splits))
+    counts = np.bincount(labels, minlength=n)
+    positions = np.stack([np.bincount(labels, base[:, 0], n),
+                          np.bincount(labels, base[:, 1], n)], axis=1) / counts[:, None]
+    yaw = camera[[group[0] for group in frames_of_pose], 2]
+    sizes = np.bincount(counts)
+    if np.count_nonzero(sizes) > 1:
+        usual = int(np.argmax(sizes))
+        _LOG.warning('%d of %d pose(s) have a number of frames other than the usual %d',
+                     n - int(sizes[usual]), n, usual)
+
+    lattice = _fit_lattice(positions, config) if n >= 2 else None
+    grid = np.full((n, 2), -1, dtype=np.int64)
+    if lattice is None:
+        edges = _knn_edges(positions, np.arange(n), config.knn)
+        edges = _connect_components(positions, edges)
+        spacing = origin = angle = None
+        graph = 'knn'
+    else:
+        spacing, origin, angle, cells, on_grid = lattice
+        grid[on_grid] = cells[on_grid]
+        edges = np.concatenate([_lattice_edges(grid, on_grid, config.connectivity),
+                                _knn_edges(positions, np.flatnonzero(~on_grid), config.knn)])
+        graph = f'grid{config.connectivity}'
+        if not on_grid.all():
+            _LOG.info('%d of %d pose(s) lie off the %.3f m lattice: joined to their %d '
+                      'nearest poses', int((~on_grid).sum()), n, spacing, config.knn)
+    edges = _unique_edges(edges)
+    n_components = _components(n, edges)[0]
+    if n_components > 1:
+        _LOG.warning('the pose graph (%s) has %d connected components', graph, n_components)
+    _LOG.info('%d frames -> %d sampled poses; %s graph, %d edges, spacing %s', len(base), n,
+              graph, len(edges), 'none' if spacing is None else f'{spacing:.4f} m')
+    return PoseSampling(positions=positions, frames_of_pose=frames_of_pose, yaw=yaw, grid=grid,
+                        spacing=spacing, origin=origin, angle=angle, edges=edges, graph=graph)
+
+
+def _group_positions(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Label points by connected groups within ``tolerance``, in order of first point."""
+    n = len(points)
+    if tolerance > 0:
+        _, labels = _components(n, cKDTree(points).query_pairs(tolerance, output_type='ndarray'))
+    else:  # exactly equal positions only
+        labels = np.unique(points, axis=0, return_inverse=True)[1].reshape(-1)
+    # Renumber in order of each group's first frame.
+    first = np.full(labels.max() + 1, n, dtype=np.intp)
+    np.minimum.at(first, labels, np.arange(n))
+    rank = np.empty_like(first)
+    rank[np.argsort(first, kind='stable')] = np.arange(len(first))
+    return rank[labels]
+
+
+def _components(n: int, edges: np.ndarray) -> tuple[int, np.ndarray]:
+    edges = np.asarray(edges, dtype=np.intp).reshape(-1, 2)
+    adjacency = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, labels = connected_components(adjacency, directed=False)
+    return int(count), labels
+
+
+def _circular_mean(angles: np.ndarray) -> float:
+    return float(np.arctan2(np.sin(angles).mean(), np.cos(angles).mean()))
+
+
+def _fit_lattice(positions: np.ndarray, config: SamplingConfig
+                 ) -> tuple[float, np.ndarray, float, np.ndarray, np.ndarray] | None:
+    """Return ``(spacing, origin, angle, cells (n,2), on_grid (n,))`` or None."""
+    n = len(positions)
+    distance, neighbour = cKDTree(positions).query(positions, k=2)
+    spacing = float(np.median(distance[:, 1]))
+    if not spacing > 0:
+        return None
+    step = positions[neighbour[:, 1]] - positions
+    # Directions modulo 90 degrees: 4 * theta folds the four lattice axes onto one.
+    angle = _circular_mean(4.0 * np.arctan2(step[:, 1], step[:, 0])) / 4.0
+    if abs(angle) < 1e-12:
+        angle = 0.0
+    c, s = math.cos(angle), math.sin(angle)
+    local = positions @ np.array([[c, -s], [s, c]])  # rotate by -angle
+    phase = 2.0 * np.pi * local / spacing
+    offset = np.array([_circular_mean(phase[:, 0]), _circular_mean(phase[:, 1])])
+    offset = offset * spacing / (2.0 * np.pi)
+    tolerance = config.grid_tolerance
+    cells, on_grid = _snap(local, offset, spacing, tolerance)
+    if on_grid.sum() >= 2 and np.ptp(cells[on_grid], axis=0).any():
+        # Least squares: local = offset + spacing * cell, both axes at once.
+        g = cells[on_grid].astype(float)
+        k = len(g)
+        design = np.zeros((2 * k, 3))
+        design[:k, 0], design[k:, 1] = 1.0, 1.0
+        design[:, 2] = np.concatenate([g[:, 0], g[:, 1]])
+        target = np.concatenate([local[on_grid, 0], local[on_grid, 1]])
+        (ox, oy, fitted), *_ = np.linalg.lstsq(design, target, rcond=None)
+        if fitted > 0:
+            offset, spacing = np.array([ox, oy]), float(fitted)
+            cells, on_grid = _snap(local, offset, spacing, tolerance)
+    if on_grid.sum() < max(2, config.min_grid_fraction * n):
+        _LOG.info('positions are not on a lattice: %d of %d within %.0f %% of a %.3f m '
+                  'spacing', int(on_grid.sum()), n, 100 * tolerance, spacing)
+        return None
+    on_grid = _one_pose_per_cell(local, offset, spacing, cells, on_grid)
+    low = cells[on_grid].min(axis=0)
+    cells = cells - low
+    origin_local = offset + spacing * low
+    origin = np.array([c * origin_local[0] - s * origin_local[1],
+                       s * origin_local[0] + c * origin_local[1]])
+    return spacing, origin, angle, cells, on_grid
+
+
+def _snap(local: np.ndarray, offset: np.ndarray, spacing: float,
+          tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    scaled = (local - offset) / spacing
+    cells = np.rint(scaled).astype(np.int64)
+    residual = np.linalg.norm(scaled - cells, axis=1)
+    return cells, residual <= tolerance
+
+
+def _one_pose_per_cell(local: np.ndarray, offset: np.ndarray, spacing: float,
+                       cells: np.ndarray, on_grid: np.ndarray) -> np.ndarray:
+    """Where poses share a cell, keep the closest on the lattice; the others go off it."""
+    index = np.flatnonzero(on_grid)
+    residual = np.linalg.norm((local[index] - offset) / spacing - cells[index], axis=1)
+    order = np.lexsort((residual, cells[index, 1], cells[index, 0]))
+    sorted_cells = cells[index[order]]
+    duplicate = np.zeros(len(order), dtype=bool)
+    duplicate[1:] = (sorted_cells[1:] == sorted_cells[:-1]).all(axis=1)
+    if duplicate.any():
+        _LOG.warning('%d pose(s) share a lattice cell with a closer pose: taken off the lattice',
+                     int(duplicate.sum()))
+    kept = on_grid.copy()
+    kept[index[order[duplicate]]] = False
+    return kept
+
+
+def _lattice_edges(grid: np.ndarray, on_grid: np.ndarray, connectivity: int) -> np.ndarray:
+    """Edges between poses in neighbouring cells (sorted keys, binary search)."""
+    index = np.flatnonzero(on_grid)
+    if len(index) < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    cells = grid[index]
+    width = int(cells[:, 1].max()) + 3  # room for j - 1 and j + 1 without wrapping
+
+    def key(c: np.ndarray) -> np.ndarray:
+        return c[:, 0] * width + (c[:, 1] + 1)
+
+    keys = key(cells)
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    edges = []
+    for offset in _OFFSETS[connectivity]:
+        target = key(cells + offset)
+        pos = np.clip(np.searchsorted(sorted_keys, target), 0, len(keys) - 1)
+        hit = sorted_keys[pos] == target
+        edges.append(np.stack([index[hit], index[order[pos[hit]]]], axis=1))
+    return np.concatenate(edges)
+
+
+def _knn_edges(positions: np.ndarray, sources: np.ndarray, knn: int) -> np.ndarray:
+    """Edges from each pose in ``sources`` to its ``knn`` nearest other poses."""
+    n = len(positions)
+    k = min(int(knn), n - 1)
+    if k < 1 or len(sources) == 0:
+        return np.empty((0, 2), dtype=np.int64)
+    _, neighbours = cKDTree(positions).query(positions[sources], k=k + 1)
+    neighbours = neighbours.reshape(len(sources), k + 1)
+    pairs = np.stack([np.repeat(sources, k + 1), neighbours.reshape(-1)], axis=1)
+    return pairs[pairs[:, 0] != pairs[:, 1]].astype(np.int64)
+
+
+def _unique_edges(edges: np.ndarray) -> np.ndarray:
+    edges = np.sort(np.asarray(edges, dtype=np.int64).reshape(-1, 2), axis=1)
+    edges = edges[edges[:, 0] != edges[:, 1]]
+    return np.unique(edges, axis=0) if len(edges) else edges.reshape(0, 2)
+
+
+def _connect_components(positions: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Add, while there are several components, the shortest edge from the smallest one."""
+    edges = _unique_edges(edges)
+    n = len(positions)
+    added = []
+    count, labels = _components(n, edges)
+    while count > 1:
+        sizes = np.bincount(labels)
+        small = int(np.argmin(sizes))
+        inside = np.flatnonzero(labels == small)
+        outside = np.flatnonzero(labels != small)
+        distance, nearest = cKDTree(positions[outside]).query(positions[inside])
+        best = int(np.argmin(distance))
+        added.append([inside[best], outside[nearest[best]]])
+        edges = _unique_edges(np.concatenate([edges, np.array(added[-1:], dtype=np.int64)]))
+        count, labels = _components(n, edges)
+    if added:
+        _LOG.info('k-nearest-neighbour graph: added %d edge(s) to connect it', len(added))
+    return edges
