@@ -364,3 +364,13 @@ def test_bad_config_values() -> None:
 def test_missing_bag_is_a_one_line_error(tmp_path: Path) -> None:
     with pytest.raises(VisibilityBuilderError, match='does not exist'):
         read_exploration(tmp_path / 'nothing')
+
+
+def test_wrong_message_type_on_a_topic(tmp_path: Path) -> None:
+    messages = [m for m in exploration_messages(2) if m[0] != '/ground_truth/pose']
+    messages.append(('/ground_truth/pose', 'std_msgs/msg/String', T0,
+                     T['std_msgs/msg/String'](data='here')))
+    with pytest.raises(VisibilityBuilderError,
+                       match=r'/ground_truth/pose has type std_msgs/msg/String, expected '
+                             r'geometry_msgs/msg/PoseStamped or '):
+        read_exploration(write_bag(tmp_path / 'b', messages))

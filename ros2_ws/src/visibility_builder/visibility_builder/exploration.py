@@ -81,6 +81,10 @@ POSE_SOURCES = ('auto', 'ground_truth', 'tf')
 SKIP_REASONS = ('bad_image', 'no_pose', 'invalid_pose')
 
 _IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
+_INFO_TYPES = ('sensor_msgs/msg/CameraInfo',)
+_POSE_TYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped',
+               'nav_msgs/msg/Odometry')
+_TF_TYPES = ('tf2_msgs/msg/TFMessage',)
 _TF, _TF_STATIC = '/tf', '/tf_static'
 
 
@@ -391,6 +395,15 @@ def read_exploration(bag_path: str | os.PathLike[str],
         topics = [image_topic, config.camera_info_topic]
         topics += [config.pose_topic] if source == 'ground_truth' else [_TF]
         topics += [_TF_STATIC] if counts.get(_TF_STATIC) else []
+        if source == 'ground_truth' and counts.get(_TF):  # base_link -> camera may be there
+            topics.append(_TF)
+        for topic in topics[1:]:
+            allowed = {config.camera_info_topic: _INFO_TYPES, config.pose_topic: _POSE_TYPES,
+                       _TF: _TF_TYPES, _TF_STATIC: _TF_TYPES}[topic]
+            if bag.topics[topic].msgtype not in allowed:
+                raise VisibilityBuilderError(
+                    f'bag {path}: {topic} has type {bag.topics[topic].msgtype}, expected '
+                    f'{" or ".join(allowed)}')
         data = _read_messages(bag, topics, image_topic, config, warn)
     return _assemble(path, data, image_topic, source, config, warn)
 
