@@ -328,20 +328,37 @@ def _checked_connection(path: str | Path) -> Iterator[sqlite3.Connection]:
     if not header.startswith(_SQLITE_MAGIC):
         raise LandmarkDbError(f'{path}: not a SQLite database')
     if len(header) < 100:
-        raise LandmarkDbError(f'{path}: truncated SQLite file ({len(header)} bytes)')
+        raise LandmarkDbError(f'{path}: truncated file ({len(header)} bytes)')
+    expected = _size_in_header(header)
+    if expected is not None and size < expected:
+        raise LandmarkDbError(f'{path}: truncated file ({size} bytes, its header says '
+                              f'{expected})')
     uri = target.resolve().as_uri() + '?mode=ro'
     try:
         connection = sqlite3.connect(uri, uri=True)
     except sqlite3.Error as error:
         raise LandmarkDbError(f'{path}: cannot open ({error})') from None
     try:
-        _check_file(connection, path, size)
+        _check_file(connection, path)
         yield connection
     finally:
         connection.close()
 
 
-def _check_file(connection: sqlite3.Connection, path: str | Path, size: int) -> None:
+def _size_in_header(header: bytes) -> int | None:
+    """File size the SQLite header records, or None when that field is not valid.
+
+    The page count at offset 28 is valid when the change counter (offset 24) equals
+    the version-valid-for number (offset 92), as every file this module writes has.
+    """
+    page_size = int.from_bytes(header[16:18], 'big')
+    page_size = 65536 if page_size == 1 else page_size
+    if header[24:28] != header[92:96]:
+        return None
+    return page_size * int.from_bytes(header[28:32], 'big')
+
+
+def _check_file(connection: sqlite3.Connection, path: str | Path) -> None:
     def pragma(name: str) -> Any:
         return connection.execute(f'PRAGMA {name}').fetchone()[0]
 
@@ -358,13 +375,11 @@ def _check_file(connection: sqlite3.Connection, path: str | Path, size: int) -> 
                 f'{SCHEMA_VERSION}: upgrade vbn')
         if version < 1:
             raise LandmarkDbError(f'{path}: invalid schema version {version}')
-        expected = pragma('page_size') * pragma('page_count')
-        if size < expected:
-            raise LandmarkDbError(f'{path}: truncated file ({size} bytes, its header '
-                                  f'says {expected})')
         problems = [row[0] for row in connection.execute('PRAGMA quick_check(5)')]
         if problems != ['ok']:
-            raise LandmarkDbError(f'{path}: damaged database ({problems[0]})')
+            detail = ' '.join(' '.join(problems).replace('*** in database main ***', '')
+                              .split())
+            raise LandmarkDbError(f'{path}: damaged database ({_shorten(detail)})')
         tables = {row[0] for row in connection.execute(
             "SELECT name FROM sqlite_master WHERE type = 'table'")}
         missing = [name for name in REQUIRED_TABLES if name not in tables]
@@ -381,6 +396,10 @@ def _check_file(connection: sqlite3.Connection, path: str | Path, size: int) -> 
                 f'{meta.get("schema_version")!r} differs from user_version {version}')
     except sqlite3.DatabaseError as error:
         raise LandmarkDbError(f'{path}: damaged or not a SQLite database ({error})') from None
+
+
+def _shorten(text: str, limit: int = 160) -> str:
+    return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
 def _array(connection: sqlite3.Connection, sql: str, dtype: Any, width: int) -> np.ndarray:

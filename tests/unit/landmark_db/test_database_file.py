@@ -1,0 +1,290 @@
+"""The landmark database file: refusal of bad files, read-only opening, crash safety."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+
+from database_samples import sample_database
+import numpy as np
+import pytest
+
+from landmark_db.database import (
+    APPLICATION_ID,
+    SCHEMA_VERSION,
+    database_summary,
+    open_database,
+    store,
+    write_database,
+)
+from landmark_db.errors import LandmarkDbError
+
+TESTS = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def db_file(tmp_path):
+    path = tmp_path / 'room.db'
+    write_database(path, sample_database(np.random.default_rng(0)))
+    return path
+
+
+def edited_copy(source: Path, target: Path, *statements: str) -> Path:
+    target.write_bytes(source.read_bytes())
+    connection = sqlite3.connect(target)
+    for statement in statements:
+        connection.execute(statement)
+    connection.commit()
+    connection.close()
+    return target
+
+
+def refused(path) -> str:
+    with pytest.raises(LandmarkDbError) as error:
+        open_database(path)
+    message = str(error.value)
+    assert '\n' not in message and str(path) in message
+    with pytest.raises(LandmarkDbError) as summary_error:
+        database_summary(path)
+    assert str(summary_error.value) == message
+    return message
+
+
+def test_header_identifies_the_file(db_file):
+    connection = sqlite3.connect(f'file:{db_file}?mode=ro', uri=True)
+    assert connection.execute('PRAGMA application_id').fetchone()[0] == APPLICATION_ID
+    assert connection.execute('PRAGMA user_version').fetchone()[0] == SCHEMA_VERSION
+    assert dict(connection.execute('SELECT key, value FROM meta'))['schema_version'] == '1'
+    # The membership index answers "which regions does class c vote for" in SQL.
+    plan = ' '.join(str(row) for row in connection.execute(
+        'EXPLAIN QUERY PLAN SELECT region FROM region_features WHERE class_id = 3'))
+    assert 'region_features_by_class' in plan
+    connection.close()
+
+
+def test_missing_file(tmp_path):
+    assert refused(tmp_path / 'none.db').endswith('none.db: no such file')
+
+
+def test_folder(tmp_path):
+    assert 'is a folder' in refused(tmp_path)
+
+
+def test_empty_file(tmp_path):
+    (tmp_path / 'empty.db').write_bytes(b'')
+    assert 'empty file' in refused(tmp_path / 'empty.db')
+
+
+def test_random_bytes(tmp_path):
+    path = tmp_path / 'noise.db'
+    path.write_bytes(np.random.default_rng(0).bytes(50_000))
+    assert refused(path).endswith('not a SQLite database')
+
+
+@pytest.mark.parametrize('fraction', [0.02, 0.5, 0.9])
+def test_truncated_copy(db_file, tmp_path, fraction):
+    data = db_file.read_bytes()
+    path = tmp_path / 'cut.db'
+    path.write_bytes(data[:int(len(data) * fraction)])
+    assert 'truncated' in refused(path)
+
+
+def test_newer_schema(db_file, tmp_path):
+    newer = SCHEMA_VERSION + 1
+    path = edited_copy(db_file, tmp_path / 'newer.db', f'PRAGMA user_version = {newer}',
+                       f"UPDATE meta SET value = '{newer}' WHERE key = 'schema_version'")
+    assert refused(path) == (f'database {path} has schema version {newer}, this build reads '
+                             f'up to {SCHEMA_VERSION}: upgrade vbn')
+
+
+def test_sqlite_file_of_another_application(tmp_path):
+    path = tmp_path / 'other.db'
+    connection = sqlite3.connect(path)
+    connection.execute('CREATE TABLE regions (id INTEGER PRIMARY KEY)')
+    connection.commit()
+    connection.close()
+    assert 'not a landmark database (a SQLite file of another application' in refused(path)
+
+
+def test_missing_table(db_file, tmp_path):
+    path = edited_copy(db_file, tmp_path / 'lost.db', 'DROP TABLE region_adjacency')
+    assert "table 'region_adjacency' is missing" in refused(path)
+
+
+@pytest.mark.parametrize('statement, message', [
+    ('DELETE FROM region_adjacency', 'region graph does not match'),
+    ('DELETE FROM class_descriptors WHERE class_id = 0', 'descriptor counts'),
+    ("UPDATE build_parameters SET value = '0' WHERE key = 'k'", 'k must be'),
+    ('UPDATE region_poses SET pose = 99 WHERE pose = 0', 'out of range'),
+    ("UPDATE model_view_features SET keypoints = x'00'", 'do not hold'),
+])
+def test_inconsistent_contents(db_file, tmp_path, statement, message):
+    path = edited_copy(db_file, tmp_path / 'edited.db', statement)
+    text = refused_open_only(path)
+    assert 'damaged database' in text and message in text
+
+
+def refused_open_only(path) -> str:
+    with pytest.raises(LandmarkDbError) as error:
+        open_database(path)
+    assert '\n' not in str(error.value)
+    return str(error.value)
+
+
+def test_corrupted_page(db_file, tmp_path):
+    data = bytearray(db_file.read_bytes())
+    page = 4096
+    data[3 * page + 8:4 * page] = np.random.default_rng(1).bytes(page - 8)  # a b-tree page
+    path = tmp_path / 'bad.db'
+    path.write_bytes(bytes(data))
+    message = refused_open_only(path)
+    assert 'damaged' in message
+
+
+def test_opening_does_not_modify_the_file(db_file):
+    before = db_file.read_bytes()
+    os.utime(db_file, ns=(1_000_000_000, 1_000_000_000))
+    open_database(db_file)
+    database_summary(db_file)
+    assert db_file.read_bytes() == before
+    assert db_file.stat().st_mtime_ns == 1_000_000_000
+    assert sorted(p.name for p in db_file.parent.iterdir()) == ['room.db']
+
+
+def test_read_only_file_opens(db_file):
+    db_file.chmod(0o444)
+    try:
+        assert open_database(db_file).n_regions >= 1
+    finally:
+        db_file.chmod(0o644)
+
+
+def test_summary_counts(db_file):
+    db = open_database(db_file)
+    summary = database_summary(db_file)
+    assert summary.counts['regions'] == db.n_regions
+    assert summary.counts['poses'] == db.n_poses == 9
+    assert summary.counts['classes'] == db.n_classes
+    assert summary.counts['class_descriptors'] == db.classes.descriptors.shape[0]
+    assert summary.counts['visibility'] == db.classes.visibility.nnz
+    assert summary.counts['model_views'] == sum(len(r.model_views) for r in db.regions)
+    assert summary.counts['landmark_features'] == db.info.k * db.n_regions
+    assert summary.counts['region_adjacency'] == db.adjacency.pairs.shape[0]
+    assert summary.build['k'] == db.info.k and summary.build['camera']['width'] == 640
+    assert sum(summary.table_bytes.values()) == summary.file_bytes == db_file.stat().st_size
+
+
+def test_failed_write_keeps_previous(db_file, monkeypatch):
+    before = db_file.read_bytes()
+
+    def explode(connection, db):
+        raise sqlite3.OperationalError('disk I/O error')
+
+    monkeypatch.setattr(store, '_insert_regions', explode)
+    with pytest.raises(LandmarkDbError, match='disk I/O error'):
+        write_database(db_file, sample_database(np.random.default_rng(1)))
+    assert db_file.read_bytes() == before
+    assert sorted(p.name for p in db_file.parent.iterdir()) == ['room.db']
+
+
+_WRITER = textwrap.dedent("""
+    import sys, time
+    from pathlib import Path
+    import numpy as np
+    from database_samples import large_database
+    from landmark_db.database import store
+
+    target, marker, mode = sys.argv[1], Path(sys.argv[2]), sys.argv[3]
+    db = large_database(np.random.default_rng(7))
+    if mode == 'pause':
+        # Stop inside the transaction, after the poses and classes are written.
+        real = store._insert_regions
+
+        def paused(connection, db):
+            real(connection, db)
+            marker.write_text('in transaction')
+            time.sleep(60)
+
+        store._insert_regions = paused
+    else:
+        marker.write_text('writing')
+    store.write_database(target, db)
+    marker.write_text('done')
+""")
+
+
+def start_writer(target: Path, marker: Path, mode: str) -> subprocess.Popen:
+    env = dict(os.environ)
+    env['PYTHONPATH'] = os.pathsep.join([str(TESTS), env.get('PYTHONPATH', '')])
+    return subprocess.Popen([sys.executable, '-c', _WRITER, str(target), str(marker), mode],
+                            env=env)
+
+
+def wait_for(marker: Path, process: subprocess.Popen, text: str) -> None:
+    deadline = time.monotonic() + 60
+    while not (marker.exists() and marker.read_text() == text):
+        assert process.poll() is None, 'the writer ended early'
+        assert time.monotonic() < deadline, 'the writer did not start'
+        time.sleep(0.02)
+
+
+def test_kill_9_inside_the_transaction_keeps_previous(tmp_path):
+    folder = tmp_path / 'out'
+    folder.mkdir()
+    target = folder / 'room.db'
+    old = sample_database(np.random.default_rng(3))
+    write_database(target, old)
+    before = target.read_bytes()
+    marker = tmp_path / 'marker'
+    process = start_writer(target, marker, 'pause')
+    try:
+        wait_for(marker, process, 'in transaction')
+        process.send_signal(signal.SIGKILL)
+        assert process.wait(30) == -signal.SIGKILL
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert target.read_bytes() == before
+    assert open_database(target) == old
+    assert sorted(p.name for p in folder.iterdir()) == ['room.db']  # no stray temporary
+
+
+def test_kill_9_at_random_moments_keeps_a_whole_database(tmp_path):
+    rng = np.random.default_rng(11)
+    folder = tmp_path / 'out'
+    folder.mkdir()
+    target = folder / 'room.db'
+    old = sample_database(np.random.default_rng(3))
+    write_database(target, old)
+    before = target.read_bytes()
+    marker = tmp_path / 'marker'
+    outcomes = []
+    for _ in range(3):
+        marker.unlink(missing_ok=True)
+        process = start_writer(target, marker, 'random')
+        try:
+            wait_for(marker, process, 'writing')
+            time.sleep(float(rng.uniform(0.0, 0.5)))
+            process.send_signal(signal.SIGKILL)
+            process.wait(30)
+        finally:
+            if process.poll() is None:
+                process.kill()
+                process.wait()
+        db = open_database(target)  # never half-written: the old or the new, whole
+        if target.read_bytes() == before:
+            outcomes.append('old')
+        else:
+            assert db.n_regions == len(db.regions) and len(db.regions[0].model_views) > 2
+            outcomes.append('new')
+            write_database(target, old)
+        for stray in folder.glob('.room.db.*.tmp'):  # killed during the final copy
+            stray.unlink()
+            outcomes.append('stray')
+    assert 'old' in outcomes or 'new' in outcomes
