@@ -59,6 +59,7 @@ import numpy as np
 
 from visibility_builder.bags import open_bag
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.geometry.frames import BASE_FRAME, CAMERA_FRAME, MAP_FRAME
 from visibility_builder.images import EncodedImage, ImageDecodeError, check_image
 
 __all__ = [
@@ -115,8 +116,8 @@ class ReadConfig:
     pose_topic: str = '/ground_truth/pose'
     pose_source: str = 'auto'
     pose_tolerance_s: float = 0.05
-    map_frame: str = 'map'
-    base_frame: str = 'base_link'
+    map_frame: str = MAP_FRAME
+    base_frame: str = BASE_FRAME
     camera_frame: str | None = None
     camera_forward_axis: str = 'z'
     max_tilt_deg: float = 2.0
@@ -229,6 +230,8 @@ class Exploration:
 
 
 # -- rigid transforms, vectorised --------------------------------------------------------
+# geometry.frames holds the planar pose algebra; the tf chain needs full 3-D rotations
+# (the optical camera frame is not a yaw rotation of base_link), stacked per image.
 def _quaternion_matrices(q: np.ndarray) -> np.ndarray:
     """``(n, 4)`` quaternions ``(x, y, z, w)`` -> ``(n, 3, 3)`` rotations; zero -> NaN."""
     q = np.asarray(q, dtype=float).reshape(-1, 4)
@@ -530,7 +533,8 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         raise VisibilityBuilderError(
             f'no usable images in bag {path}: all {total} on {image_topic} are bad '
             f'({next(iter(data.bad_images), "unknown problem")})')
-    camera_frame = (config.camera_frame or images[0][2] or info.frame_id or 'camera').lstrip('/')
+    camera_frame = config.camera_frame or images[0][2] or info.frame_id or CAMERA_FRAME
+    camera_frame = camera_frame.lstrip('/')
     frame_ids = {'map': config.map_frame, 'base': config.base_frame, 'camera': camera_frame}
     stamps = np.array([stamp for stamp, _, _ in images], dtype=np.int64)
     tolerance_ns = int(round(config.pose_tolerance_s * 1e9))
