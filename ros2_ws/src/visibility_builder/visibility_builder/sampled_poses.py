@@ -12,7 +12,8 @@ Steps:
 1. **Positions**: frames whose base positions lie within ``position_tolerance`` of
    each other (single linkage) form one pose at their mean position. The base
    position is used, not the camera's: a robot turning in place stays where it is,
-   while a camera mounted off its rotation axis moves on a circle.
+   while a camera mounted off its rotation axis moves on a circle. Grouping looks at
+   positions only, not at time: a position visited twice is one pose.
 2. **Lattice**: the spacing is the median nearest-neighbour distance; the lattice
    orientation the circular mean of the nearest-neighbour directions modulo 90
    degrees; the origin the circular mean of the positions modulo the spacing.
