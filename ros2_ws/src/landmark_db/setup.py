@@ -29,6 +29,8 @@ setup(
             'validate = landmark_db.cli.validate:register',
             'simulate = landmark_db.cli.simulate:register',
             'bench-decomposition = landmark_db.cli.bench_decomposition:register',
+            'db-info = landmark_db.cli.db_info:register',
+            'db-export = landmark_db.cli.db_export:register',
         ],
     },
 )
