@@ -55,10 +55,10 @@ def test_seeded_growth_matches_the_plain_greedy(seed, k, rho, algo_seed):
         fast = best_module._grow_candidates(problem, int(pose), problem.coverable, cache, radii)
         plain = _plain_grow(problem, int(pose), radii)
         assert len(fast) == len(plain)
-        for (poses_a, cols_a), (poses_b, cols_b) in zip(fast, plain):
-            assert np.array_equal(cols_a, cols_b)
-            assert np.array_equal(poses_a, poses_b)
-            assert int(pose) in poses_a
+        for region, (poses_b, cols_b) in zip(fast, plain):
+            assert np.array_equal(region.columns, cols_b)
+            assert np.array_equal(region.poses, poses_b)
+            assert int(pose) in region.poses
 
 
 def test_component_cache_returns_the_seed_component():

@@ -20,6 +20,7 @@ from landmark_db.decomposition.overlap import (
     neighbourhood_matrix,
     reduce_visibility,
 )
+from landmark_db.decomposition.problem import ZeroRegion, zero_problem
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import grid_world
@@ -151,18 +152,40 @@ def test_validator_reports_each_kind_of_problem():
 def test_redundancy_elimination_leaves_a_minimal_cover():
     # Poses 0..1 are in A, B, C (omega 3 each); D = {1, 2} and E = {2} have omega 2.
     pieces = [[0, 1], [0, 1], [0, 1], [1, 2], [2]]
-    regions = [(np.array(p), np.array([i])) for i, p in enumerate(pieces)]
+    regions = [ZeroRegion(np.array(p), np.array([i])) for i, p in enumerate(pieces)]
     for seed in range(5):
         kept = eliminate_redundant(regions, 3, np.random.default_rng(seed))
         assert len(kept) == 2
         count = np.zeros(3, int)
-        for poses, _ in kept:
-            count[poses] += 1
+        for region in kept:
+            count[region.poses] += 1
         assert (count >= 1).all()
-        assert all((count[poses] == 1).any() for poses, _ in kept)  # minimal
+        assert all((count[region.poses] == 1).any() for region in kept)  # minimal
     # Nothing to drop: each region has a pose of its own.
-    alone = [(np.array([0]), np.array([0])), (np.array([1]), np.array([1]))]
+    alone = [ZeroRegion(np.array([0]), np.array([0])), ZeroRegion(np.array([1]), np.array([1]))]
     assert len(eliminate_redundant(alone, 2, np.random.default_rng(0))) == 2
+
+
+@pytest.mark.parametrize('module, function, variants', [
+    ('grow_regions', 'grow_regions', ('A1', 'A2', 'A3')),
+    ('shrink_regions', 'shrink_regions', ('B1', 'B2')),
+])
+def test_algorithms_return_typed_regions_and_reject_unknown_variants(module, function,
+                                                                     variants):
+    import importlib
+
+    run = getattr(importlib.import_module(f'landmark_db.decomposition.{module}'), function)
+    # Feature 0 seen from poses 0-2, feature 1 from poses 2-4.
+    world = line_world([[1, 0], [1, 0], [1, 1], [0, 1], [0, 1]])
+    for variant in variants:
+        problem = zero_problem(world, 1, 0, 0, np.random.default_rng(0))
+        regions = run(problem, variant)
+        assert all(isinstance(r, ZeroRegion) for r in regions)
+        assert sorted((r.poses.tolist(), r.columns.tolist()) for r in regions) == \
+            [([0, 1, 2], [0]), ([2, 3, 4], [1])]
+    problem = zero_problem(world, 1, 0, 0, np.random.default_rng(0))
+    with pytest.raises(LandmarkDbError, match="unknown .* variant 'Z9'"):
+        run(problem, 'Z9')
 
 
 def test_runs_are_reproducible_and_seed_dependent():

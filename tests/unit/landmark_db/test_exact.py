@@ -71,8 +71,8 @@ def test_exact_beats_greedy_on_a_set_cover_trap():
 def test_candidates_are_the_maximal_components():
     world = figure_3_2_world(True)
     problem = zero_problem(world, 2, 0, 0, np.random.default_rng(0))
-    found = sorted((p.tolist(), sorted(world.feature_ids[c].tolist()))
-                   for p, c in candidate_regions(problem))
+    found = sorted((r.poses.tolist(), sorted(world.feature_ids[r.columns].tolist()))
+                   for r in candidate_regions(problem))
     # {5, 6} is seen from C and D; every other pair is seen from one pose only.
     assert ([2, 3], [5, 6]) in found
     assert all(len(p) == 1 for p, _ in found if p != [2, 3])

@@ -14,9 +14,11 @@ exact    optimum by set cover + HiGHS MILP           :mod:`.exact`
 best     candidate pool + set cover (new heuristic)  :mod:`.best`
 ======== =========================================== ==============================
 
-Shared rules (sigma rule of Section 5.5, disconnected pieces, ties) live in
-:mod:`.problem`; redundancy elimination (Section 5.4) in :mod:`.redundancy`;
-the validator in :mod:`.validate`.
+Every algorithm returns a list of :class:`~.problem.ZeroRegion` (poses and landmark
+columns on the reduced instance). Shared rules (sigma rule of Section 5.5,
+disconnected pieces, ties) live in :mod:`.problem`; redundancy elimination
+(Section 5.4) in :mod:`.redundancy`; the minimum set cover used by exact and best in
+:mod:`.set_cover`; the validator in :mod:`.validate`.
 """
 from __future__ import annotations
 
@@ -38,7 +40,7 @@ from landmark_db.decomposition.overlap import (
     expand_region,
     neighbourhood_matrix,
 )
-from landmark_db.decomposition.problem import ZeroProblem, zero_problem
+from landmark_db.decomposition.problem import ZeroProblem, ZeroRegion, zero_problem
 from landmark_db.decomposition.validate import validate
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
@@ -108,9 +110,9 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = 0, sigma:
         else []
     hood = neighbourhood_matrix(world.adjacency, rho) if rho else None
     regions = []
-    for poses, cols in reduced:
-        expanded = expand_region(hood, poses) if hood is not None else poses
-        regions.append(Region(expanded, world.feature_ids[np.sort(cols)]))
+    for region in reduced:
+        expanded = expand_region(hood, region.poses) if hood is not None else region.poses
+        regions.append(Region(expanded, world.feature_ids[np.sort(region.columns)]))
     if hood is None:
         covered = np.zeros(world.n_poses, dtype=bool)
         for region in regions:
@@ -125,7 +127,7 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = 0, sigma:
 
 
 def _run(problem: ZeroProblem, algorithm: str, alpha: float,
-         options: dict[str, Any]) -> list[tuple[np.ndarray, np.ndarray]]:
+         options: dict[str, Any]) -> list[ZeroRegion]:
     if algorithm in ('A1', 'A2', 'A3'):
         from landmark_db.decomposition.grow_regions import grow_regions
         return grow_regions(problem, algorithm)

@@ -43,7 +43,12 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from landmark_db.decomposition.problem import ZeroProblem, gather_slices, split_components
+from landmark_db.decomposition.problem import (
+    ZeroProblem,
+    ZeroRegion,
+    gather_slices,
+    split_components,
+)
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.set_cover import (
     cover_matrix,
@@ -71,7 +76,7 @@ LP_METHOD = 'highs-ds'
 
 def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.0,
                multiplicity: int = 5, max_seeds: int | None = None, merge_rounds: int = 3,
-               ) -> list[tuple[np.ndarray, np.ndarray]]:
+               ) -> list[ZeroRegion]:
     """Run the ``best`` heuristic on a 0-MORDP instance.
 
     Args:
@@ -86,19 +91,19 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
         merge_rounds: rounds of merge candidates plus local search after the cover.
 
     Returns:
-        Regions as (sorted pose indices, k landmark columns).
+        The regions.
     """
     n = problem.n_poses
     coverable = problem.coverable
     reference = shrink_regions(problem, 'B2')
     budget = _uncovered_count(reference, coverable)
     pool = _Pool(n)
-    pool.reference = [pool.add(*region) for region in reference]
+    pool.reference = [pool.add(region) for region in reference]
     extra = shrink_regions(problem, 'B1')
     if problem.sigma:
         extra += shrink_regions(replace(problem, sigma=0), 'B2')
     for region in extra:
-        pool.add(*region)
+        pool.add(region)
     cache = _ComponentCache(problem)
     _add_seeded_candidates(problem, pool, cache, multiplicity, max_seeds)
 
@@ -123,7 +128,7 @@ def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.
         return reference
     if chosen is None:
         return reference
-    regions = [(pool.poses[i], pool.landmarks[i]) for i in chosen]
+    regions = [ZeroRegion(pool.poses[i], pool.landmarks[i]) for i in chosen]
     regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
     _LOG.debug('best: %d candidates, %d regions (%d uncovered); B.2 %d (%d)', len(pool.poses),
                len(regions), _uncovered_count(regions, coverable), len(reference), budget)
@@ -214,7 +219,7 @@ def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCa
         if len(chosen_cols) < problem.k or region.size == 0:
             continue
         landmark = np.sort(np.asarray(chosen_cols, dtype=np.int64))
-        pool.add(cache.component(landmark, int(region[0])), landmark)
+        pool.add(ZeroRegion(cache.component(landmark, int(region[0])), landmark))
     return len(pool.poses) - before
 
 
@@ -309,19 +314,18 @@ def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentC
         seeded[seed] = True
         seeds_left -= 1
         for region in _grow_candidates(problem, seed, coverable, cache, radii):
-            pool.add(*region)
+            pool.add(region)
 
 
-def _uncovered_count(regions: list[tuple[np.ndarray, np.ndarray]],
-                     coverable: np.ndarray) -> int:
+def _uncovered_count(regions: list[ZeroRegion], coverable: np.ndarray) -> int:
     covered = np.zeros(coverable.size, dtype=bool)
-    for poses, _ in regions:
-        covered[poses] = True
+    for region in regions:
+        covered[region.poses] = True
     return int(np.count_nonzero(coverable & ~covered))
 
 
-def _sigma_prune(regions: list[tuple[np.ndarray, np.ndarray]], problem: ZeroProblem,
-                 budget: int) -> list[tuple[np.ndarray, np.ndarray]]:
+def _sigma_prune(regions: list[ZeroRegion], problem: ZeroProblem,
+                 budget: int) -> list[ZeroRegion]:
     """Drop regions uniquely covering at most sigma poses, fewest first, within budget.
 
     The k-coverable poses left uncovered never exceed ``budget`` (B.2's count).
@@ -329,14 +333,15 @@ def _sigma_prune(regions: list[tuple[np.ndarray, np.ndarray]], problem: ZeroProb
     if problem.sigma == 0 or not regions:
         return regions
     count = np.zeros(problem.n_poses, dtype=np.int64)
-    for poses, _ in regions:
-        count[poses] += 1
+    for region in regions:
+        count[region.poses] += 1
     lost = int(np.count_nonzero(problem.coverable & (count == 0)))
     alive = np.ones(len(regions), dtype=bool)
     tie = problem.rng.random(len(regions))
     while True:
-        unique = np.array([np.count_nonzero(count[poses] == 1) if keep else np.iinfo(np.int64).max
-                           for (poses, _), keep in zip(regions, alive)])
+        unique = np.array([np.count_nonzero(count[region.poses] == 1) if keep
+                           else np.iinfo(np.int64).max
+                           for region, keep in zip(regions, alive)])
         low = unique.min()
         if low > problem.sigma or lost + low > budget:
             break
@@ -344,7 +349,7 @@ def _sigma_prune(regions: list[tuple[np.ndarray, np.ndarray]], problem: ZeroProb
         ties = np.flatnonzero(unique == low)
         drop = int(ties[np.argmax(tie[ties])])
         alive[drop] = False
-        count[regions[drop][0]] -= 1
+        count[regions[drop].poses] -= 1
     return [region for region, keep in zip(regions, alive) if keep]
 
 
@@ -358,8 +363,9 @@ class _Pool:
         self.reference: list[int] = []
         self._seen: dict[bytes, int] = {}
 
-    def add(self, poses: np.ndarray, landmark: np.ndarray) -> int:
+    def add(self, region: ZeroRegion) -> int:
         """Add a candidate (ignored if already present); return its index."""
+        poses, landmark = region.poses, region.columns
         key = poses.tobytes()
         if key in self._seen:
             return self._seen[key]
@@ -369,13 +375,10 @@ class _Pool:
         self.counts[poses] += 1
         return len(self.poses) - 1
 
-    def poses_landmarks(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        return list(zip(self.poses, self.landmarks))
-
 
 def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
                      cache: _ComponentCache,
-                     radii: list[int]) -> list[tuple[np.ndarray, np.ndarray]]:
+                     radii: list[int]) -> list[ZeroRegion]:
     """Return candidate regions around ``seed``, one per ball radius."""
     distance = csgraph.dijkstra(cache.graph, indices=seed, unweighted=True,
                                 limit=max(radii) + 0.5)
@@ -410,7 +413,7 @@ def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
             members *= local[:, j]
         if len(chosen) == problem.k:
             landmark = np.sort(allowed[chosen])
-            out.append((cache.component(landmark, seed), landmark))
+            out.append(ZeroRegion(cache.component(landmark, seed), landmark))
     return out
 
 

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from landmark_db.decomposition.problem import ZeroProblem, split_components
+from landmark_db.decomposition.problem import ZeroProblem, ZeroRegion, split_components
 from landmark_db.decomposition.set_cover import solve_set_cover
 from landmark_db.errors import LandmarkDbError
 
@@ -38,12 +38,12 @@ MAX_CANDIDATES = 50_000
 
 def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
                       max_candidates: int = MAX_CANDIDATES,
-                      ) -> list[tuple[np.ndarray, np.ndarray]]:
+                      ) -> list[ZeroRegion]:
     """Enumerate the maximal candidate regions of a 0-MORDP instance.
 
     Returns:
-        Distinct (sorted poses, k landmark columns) pairs, one per connected component
-        of {v : L subset of F~_v} over all k-subsets L seen together somewhere.
+        Distinct regions, one per connected component of {v : L subset of F~_v} over
+        all k-subsets L seen together somewhere (pose sets differ).
 
     Raises:
         LandmarkDbError: when the enumeration would exceed the limits.
@@ -69,7 +69,7 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
         for col in subset[1:]:
             mask &= masks[col]
         pose_sets.setdefault(mask, subset)
-    candidates: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+    candidates: dict[bytes, ZeroRegion] = {}
     n_bytes = (problem.n_poses + 7) // 8
     for mask, subset in pose_sets.items():
         bits = np.unpackbits(np.frombuffer(mask.to_bytes(n_bytes, 'little'), dtype=np.uint8),
@@ -78,7 +78,7 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
         for piece in split_components(problem.adjacency, poses):
             key = piece.tobytes()
             if key not in candidates:
-                candidates[key] = (piece, np.asarray(subset, dtype=np.int64))
+                candidates[key] = ZeroRegion(piece, np.asarray(subset, dtype=np.int64))
                 if len(candidates) > max_candidates:
                     raise LandmarkDbError(
                         f'exact solver refused: more than {max_candidates} candidate '
@@ -88,7 +88,7 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
 
 def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,
                 max_subsets: int = MAX_SUBSETS,
-                max_candidates: int = MAX_CANDIDATES) -> list[tuple[np.ndarray, np.ndarray]]:
+                max_candidates: int = MAX_CANDIDATES) -> list[ZeroRegion]:
     """Return an optimum 0-MORDP decomposition (complete cover, sigma ignored).
 
     Raises:
@@ -99,7 +99,7 @@ def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,
         return []
     candidates = candidate_regions(problem, max_subsets, max_candidates)
     chosen, optimal = solve_set_cover(problem.n_poses, required,
-                                      [poses for poses, _ in candidates], time_limit)
+                                      [c.poses for c in candidates], time_limit)
     if not optimal:
         raise LandmarkDbError(
             f'exact solver: HiGHS did not prove optimality within {time_limit:g} s '

@@ -25,15 +25,16 @@ import heapq
 
 import numpy as np
 
-from landmark_db.decomposition.problem import CoverState, ZeroProblem, gather_slices
+from landmark_db.decomposition.problem import CoverState, ZeroProblem, ZeroRegion, gather_slices
 from landmark_db.decomposition.redundancy import eliminate_redundant
+from landmark_db.errors import LandmarkDbError
 
 __all__ = ['grow_regions']
 
 _SEED_RULES = ('A1', 'A2', 'A3')
 
 
-def grow_regions(problem: ZeroProblem, variant: str) -> list[tuple[np.ndarray, np.ndarray]]:
+def grow_regions(problem: ZeroProblem, variant: str) -> list[ZeroRegion]:
     """Run algorithm A.1, A.2 or A.3 on a 0-MORDP instance.
 
     Args:
@@ -41,10 +42,13 @@ def grow_regions(problem: ZeroProblem, variant: str) -> list[tuple[np.ndarray, n
         variant: ``'A1'`` (fewest features first), ``'A2'`` (most) or ``'A3'`` (random).
 
     Returns:
-        Regions as (sorted pose indices, k landmark columns), redundancy eliminated.
+        The regions, redundancy eliminated.
+
+    Raises:
+        LandmarkDbError: on an unknown ``variant``.
     """
     if variant not in _SEED_RULES:
-        raise ValueError(f'unknown A.x variant {variant!r}')
+        raise LandmarkDbError(f'unknown A.x variant {variant!r}; choose A1, A2 or A3')
     n = problem.n_poses
     state = CoverState(problem)
     candidates = np.flatnonzero(problem.coverable)

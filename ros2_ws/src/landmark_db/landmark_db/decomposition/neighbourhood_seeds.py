@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from landmark_db.decomposition.overlap import neighbourhood_matrix
-from landmark_db.decomposition.problem import CoverState, ZeroProblem
+from landmark_db.decomposition.problem import CoverState, ZeroProblem, ZeroRegion
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.shrink_regions import choose_landmark, shrink_pass
 
@@ -69,8 +69,7 @@ def neighbourhood_radius(problem: ZeroProblem) -> int:
     return radius
 
 
-def neighbourhood_seeds(problem: ZeroProblem,
-                        alpha: float) -> list[tuple[np.ndarray, np.ndarray]]:
+def neighbourhood_seeds(problem: ZeroProblem, alpha: float) -> list[ZeroRegion]:
     """Run algorithm C on a 0-MORDP instance.
 
     Args:
@@ -78,7 +77,7 @@ def neighbourhood_seeds(problem: ZeroProblem,
         alpha: the least fraction of unassigned poses in N_r(v) for v to seed a region.
 
     Returns:
-        Regions as (sorted pose indices, k landmark columns), redundancy eliminated.
+        The regions, redundancy eliminated.
     """
     state = CoverState(problem)
     radius = neighbourhood_radius(problem)

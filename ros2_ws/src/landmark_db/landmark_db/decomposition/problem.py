@@ -36,8 +36,27 @@ from landmark_db.decomposition.coverable import coverable_poses
 from landmark_db.decomposition.overlap import reduce_visibility
 from landmark_db.world import WorldInstance
 
-__all__ = ['CoverState', 'ZeroProblem', 'component_of', 'gather_slices', 'induced_subgraph',
-           'split_components', 'zero_problem']
+__all__ = ['CoverState', 'ZeroProblem', 'ZeroRegion', 'component_of', 'gather_slices',
+           'induced_subgraph', 'split_components', 'zero_problem']
+
+
+@dataclass(frozen=True, eq=False)
+class ZeroRegion:
+    """One region of a 0-MORDP decomposition, as every algorithm returns it.
+
+    Unlike :class:`~landmark_db.decomposition.model.Region` (the output: poses
+    expanded back under rho, landmark as feature *ids*), this is the region on the
+    reduced instance with its landmark as *columns* of ``ZeroProblem.visible``;
+    :func:`~landmark_db.decomposition.decompose` turns one into the other.
+
+    Attributes:
+        poses: sorted unique int64 pose indices, a connected set.
+        columns: the landmark: k sorted int64 feature columns seen (in the reduced
+            sets F~_v) from every pose of ``poses``.
+    """
+
+    poses: np.ndarray
+    columns: np.ndarray
 
 
 @dataclass(eq=False)
@@ -259,12 +278,12 @@ class CoverState:
     Attributes:
         problem: the 0-MORDP instance.
         unassigned: ``(n,)`` bool, the set U.
-        regions: kept regions as (sorted pose indices, landmark feature columns).
+        regions: the kept regions.
     """
 
     problem: ZeroProblem
     unassigned: np.ndarray = field(init=False)
-    regions: list[tuple[np.ndarray, np.ndarray]] = field(init=False, default_factory=list)
+    regions: list[ZeroRegion] = field(init=False, default_factory=list)
 
     def __post_init__(self) -> None:
         self.unassigned = self.problem.coverable.copy()
@@ -280,7 +299,7 @@ class CoverState:
         gain = int(np.count_nonzero(self.unassigned[poses]))
         self.unassigned[poses] = False
         if gain > self.problem.sigma and gain > 0:
-            self.regions.append((poses, np.asarray(cols, dtype=np.int64)))
+            self.regions.append(ZeroRegion(poses, np.asarray(cols, dtype=np.int64)))
             return True
         return False
 

@@ -11,15 +11,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from landmark_db.decomposition.problem import ZeroRegion
+
 __all__ = ['eliminate_redundant']
 
 
-def eliminate_redundant(regions: list[tuple[np.ndarray, np.ndarray]], n_poses: int,
-                        rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:
+def eliminate_redundant(regions: list[ZeroRegion], n_poses: int,
+                        rng: np.random.Generator) -> list[ZeroRegion]:
     """Drop redundant regions, largest omega first, until the cover is minimal.
 
     Args:
-        regions: (sorted pose indices, landmark columns) pairs.
+        regions: the regions.
         n_poses: number of poses.
         rng: seeded generator for tie-breaking.
 
@@ -29,8 +31,8 @@ def eliminate_redundant(regions: list[tuple[np.ndarray, np.ndarray]], n_poses: i
     d = len(regions)
     if d <= 1:
         return list(regions)
-    sizes = np.array([r[0].size for r in regions], dtype=np.int64)
-    flat = np.concatenate([r[0] for r in regions])
+    sizes = np.array([r.poses.size for r in regions], dtype=np.int64)
+    flat = np.concatenate([r.poses for r in regions])
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
     count = np.bincount(flat, minlength=n_poses)
     alive = sizes > 0
@@ -44,5 +46,5 @@ def eliminate_redundant(regions: list[tuple[np.ndarray, np.ndarray]], n_poses: i
         candidates = np.flatnonzero(omega == best)
         drop = int(candidates[np.argmax(priority[candidates])])
         alive[drop] = False
-        count[regions[drop][0]] -= 1
+        count[regions[drop].poses] -= 1
     return [region for region, keep in zip(regions, alive) if keep]

@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from landmark_db.decomposition.problem import CoverState, ZeroProblem
+from landmark_db.decomposition.problem import CoverState, ZeroProblem, ZeroRegion
 from landmark_db.decomposition.redundancy import eliminate_redundant
+from landmark_db.errors import LandmarkDbError
 
 __all__ = ['choose_landmark', 'shrink_pass', 'shrink_regions']
 
 
-def shrink_regions(problem: ZeroProblem, variant: str) -> list[tuple[np.ndarray, np.ndarray]]:
+def shrink_regions(problem: ZeroProblem, variant: str) -> list[ZeroRegion]:
     """Run algorithm B.1 or B.2 on a 0-MORDP instance.
 
     Args:
@@ -39,10 +40,13 @@ def shrink_regions(problem: ZeroProblem, variant: str) -> list[tuple[np.ndarray,
         variant: ``'B1'`` or ``'B2'``.
 
     Returns:
-        Regions as (sorted pose indices, k landmark columns).
+        The regions.
+
+    Raises:
+        LandmarkDbError: on an unknown ``variant``.
     """
     if variant not in ('B1', 'B2'):
-        raise ValueError(f'unknown B.x variant {variant!r}')
+        raise LandmarkDbError(f'unknown B.x variant {variant!r}; choose B1 or B2')
     state = CoverState(problem)
     if variant == 'B1':
         shrink_pass(problem, state)
@@ -93,8 +97,7 @@ def shrink_pass(problem: ZeroProblem, state: CoverState) -> None:
         counts_u -= problem.feature_counts(leaving)
 
 
-def _shrink_with_purge(problem: ZeroProblem,
-                       state: CoverState) -> list[tuple[np.ndarray, np.ndarray]]:
+def _shrink_with_purge(problem: ZeroProblem, state: CoverState) -> list[ZeroRegion]:
     tracker = _UniqueCover(problem.n_poses, problem.rng)
     counts_u = problem.feature_counts(np.flatnonzero(state.unassigned))
     while True:
@@ -110,7 +113,7 @@ def _shrink_with_purge(problem: ZeroProblem,
             continue
         gain = 0
         for index in kept:
-            poses = state.regions[index][0]
+            poses = state.regions[index].poses
             gain += int(np.count_nonzero(tracker.cover[poses] == 0))
             tracker.add(index, poses)
         # Purge (Altgreedy): drop the cheapest older regions while the poses they
@@ -121,7 +124,7 @@ def _shrink_with_purge(problem: ZeroProblem,
             if drop < 0 or lost + cost >= gain:
                 break
             lost += cost
-            freed = tracker.remove(drop, state.regions[drop][0])
+            freed = tracker.remove(drop, state.regions[drop].poses)
             if freed.size:
                 state.unassigned[freed] = True
                 counts_u += problem.feature_counts(freed)
