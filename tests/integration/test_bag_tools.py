@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from visibility_builder.bag_io import TYPESTORE, BagWriter, default_qos, open_bag
+from visibility_builder.bags import TYPESTORE, BagWriter, default_qos, open_bag
 
 pytestmark = pytest.mark.integration
 

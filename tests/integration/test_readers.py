@@ -20,8 +20,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from visibility_builder.bag_info import bag_paths
-from visibility_builder.bag_io import TYPESTORE, BagWriter, default_qos, open_bag
+from visibility_builder.bags import TYPESTORE, BagWriter, bag_paths, default_qos, open_bag
 
 pytestmark = pytest.mark.integration
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
-from visibility_builder.bag_io import deserialize, open_bag
+from visibility_builder.bags import deserialize, open_bag
 from visibility_builder.transforms import StampedTransform
 
 pytestmark = pytest.mark.integration

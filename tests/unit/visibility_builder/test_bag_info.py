@@ -1,4 +1,4 @@
-"""Tests of visibility_builder.bag_info and ``vbn bag-info``."""
+"""Tests of visibility_builder.bags.info and ``vbn bag-info``."""
 from __future__ import annotations
 
 import argparse
@@ -10,13 +10,15 @@ from mcap.reader import make_reader
 import numpy as np
 import pytest
 
-from visibility_builder.bag_info import (
+from visibility_builder.bags import (
+    TYPESTORE,
+    BagWriter,
     bag_paths,
+    default_qos,
     format_bag_info,
     format_size,
     summarize_bag,
 )
-from visibility_builder.bag_io import TYPESTORE, BagWriter, default_qos
 from visibility_builder.cli import bag_info as bag_info_cli
 from visibility_builder.errors import VisibilityBuilderError
 

@@ -1,4 +1,4 @@
-"""Tests of visibility_builder.bag_io: writing and reading rosbag2 MCAP bags, bad input."""
+"""Tests of visibility_builder.bags: writing and reading rosbag2 MCAP bags, bad input."""
 from __future__ import annotations
 
 import os
@@ -14,7 +14,7 @@ import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from ruamel.yaml import YAML
 
-from visibility_builder.bag_io import (
+from visibility_builder.bags import (
     TYPESTORE,
     BagWriter,
     default_qos,
@@ -246,7 +246,7 @@ def test_writer_input_errors(tmp_path: Path) -> None:
 
 def test_qos_profiles_parse_from_yaml_and_dicts() -> None:
     qos = default_qos(durability='transient_local', depth=1)
-    from visibility_builder.bag_io import dump_qos_yaml
+    from visibility_builder.bags import dump_qos_yaml
     assert parse_qos_profiles(dump_qos_yaml([qos])) == [qos]
     assert parse_qos_profiles(None) == []
     with pytest.raises(VisibilityBuilderError):

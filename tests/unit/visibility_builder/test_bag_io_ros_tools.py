@@ -8,7 +8,7 @@ from rclpy.duration import Duration
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 import yaml
 
-from visibility_builder.bag_io import default_qos
+from visibility_builder.bags import default_qos
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.ros_tools.msgtypes import (
     DEFAULT_DEPTH,

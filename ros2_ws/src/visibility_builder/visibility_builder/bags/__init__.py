@@ -1,11 +1,18 @@
-"""Read and write rosbag2 MCAP bags (no rclpy): the public API of the bag modules.
+"""Read and write rosbag2 MCAP bags (no rclpy), one module per concern.
 
-Import bag reading, writing, QoS, serialization and summaries from here
-(``from visibility_builder.bags import open_bag, BagWriter``).
+* :mod:`.writer`: :class:`BagWriter`, zstd-chunked rosbag2 directories written atomically;
+* :mod:`.reader`: :class:`BagReader` / :func:`open_bag`, bag directories or bare ``.mcap``
+  files, damaged ones included;
+* :mod:`.recovery`: the scan that reads the intact part of a damaged MCAP file;
+* :mod:`.qos`: offered QoS profiles as rosbag2 records them;
+* :mod:`.serialization`: CDR with the ROS 2 Jazzy typestore;
+* :mod:`.info`: the summary ``vbn bag-info`` prints.
+
+Import from here: ``from visibility_builder.bags import open_bag, BagWriter``.
 """
 from __future__ import annotations
 
-from visibility_builder.bag_info import (
+from visibility_builder.bags.info import (
     BagSummary,
     TopicSummary,
     bag_paths,
@@ -13,20 +20,15 @@ from visibility_builder.bag_info import (
     format_size,
     summarize_bag,
 )
-from visibility_builder.bag_io import (
-    ROSBAG2_VERSION,
+from visibility_builder.bags.qos import default_qos, dump_qos_yaml, parse_qos_profiles
+from visibility_builder.bags.reader import BagReader, TopicInfo, open_bag
+from visibility_builder.bags.serialization import (
     TYPESTORE,
-    BagReader,
-    BagWriter,
-    TopicInfo,
-    default_qos,
     deserialize,
-    dump_qos_yaml,
     normalize_msgtype,
-    open_bag,
-    parse_qos_profiles,
     serialize,
 )
+from visibility_builder.bags.writer import ROSBAG2_VERSION, BagWriter
 
 __all__ = [
     'ROSBAG2_VERSION',

@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     """Print the summary; return 0."""
     import json
 
-    from visibility_builder.bag_info import format_bag_info, summarize_bag
+    from visibility_builder.bags import format_bag_info, summarize_bag
 
     summary = summarize_bag(args.bag, verify=args.verify)
     if args.json:

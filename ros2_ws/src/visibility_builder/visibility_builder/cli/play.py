@@ -41,7 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Play the bag; return 0 (also when interrupted with Ctrl-C)."""
-    from visibility_builder.bag_io import open_bag
+    from visibility_builder.bags import open_bag
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.ros_tools.play import Player, PlayOptions
     from visibility_builder.ros_tools.session import (

@@ -29,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     """Record until stopped; return 0."""
     import threading
 
-    from visibility_builder.bag_io import BagWriter
+    from visibility_builder.bags import BagWriter
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.ros_tools.record import Recorder
     from visibility_builder.ros_tools.session import on_stop_signals, ros_node

@@ -2,7 +2,7 @@
 
 These are the only modules of visibility_builder's bag tools that import rclpy or
 message packages; the bag reading and writing they use is in
-:mod:`visibility_builder.bag_io`.
+:mod:`visibility_builder.bags`.
 """
 
 # Checked on import, before any module of this package imports rclpy: with an

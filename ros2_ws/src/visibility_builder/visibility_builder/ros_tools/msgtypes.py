@@ -31,7 +31,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-from visibility_builder.bag_io import normalize_msgtype
+from visibility_builder.bags import normalize_msgtype
 from visibility_builder.errors import VisibilityBuilderError
 
 __all__ = [

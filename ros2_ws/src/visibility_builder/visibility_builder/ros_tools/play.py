@@ -32,7 +32,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from visibility_builder.bag_io import BagReader
+from visibility_builder.bags import BagReader
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.ros_tools.msgtypes import import_message_class, profile_from_bag_qos
 

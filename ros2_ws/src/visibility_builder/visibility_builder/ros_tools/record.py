@@ -7,7 +7,7 @@ so that ``vbn play`` offers them again. Messages arrive as serialized bytes
 (``create_subscription(..., raw=True)``) and are written unchanged, stamped with
 their receive time.
 
-The bag is written in place (:class:`~visibility_builder.bag_io.BagWriter` with
+The bag is written in place (:class:`~visibility_builder.bags.BagWriter` with
 ``atomic=False``). Stopping -- by :meth:`Recorder.stop` from a SIGINT/SIGTERM
 handler, or when the duration is over -- first takes every message already
 delivered to the process, then closes the bag, so that the bag is valid and
@@ -22,7 +22,7 @@ from typing import Any
 
 from rclpy.node import Node
 
-from visibility_builder.bag_io import TYPESTORE, BagWriter, normalize_msgtype
+from visibility_builder.bags import TYPESTORE, BagWriter, normalize_msgtype
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.ros_tools.msgtypes import (
     bag_qos_from_profile,

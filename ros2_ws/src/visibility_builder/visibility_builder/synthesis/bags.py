@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from landmark_db.scene import Scene
-from visibility_builder.bag_io import BagWriter, default_qos
+from visibility_builder.bags import BagWriter, default_qos
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.geometry.camera import make_camera
 from visibility_builder.geometry.frames import compose_poses, invert_pose

@@ -12,7 +12,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from visibility_builder.bag_io import TYPESTORE
+from visibility_builder.bags import TYPESTORE
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.geometry.camera import CameraInfoFields
 from visibility_builder.geometry.frames import BASE_TO_CAMERA_QUATERNION, yaw_quaternion

@@ -12,9 +12,16 @@ from datetime import UTC, datetime
 import os
 from pathlib import Path
 
-from visibility_builder.bag_io import BagReader, open_bag
+from visibility_builder.bags.reader import BagReader, open_bag
 
-__all__ = ['BagSummary', 'TopicSummary', 'format_bag_info', 'format_size', 'summarize_bag']
+__all__ = [
+    'BagSummary',
+    'TopicSummary',
+    'bag_paths',
+    'format_bag_info',
+    'format_size',
+    'summarize_bag',
+]
 
 
 @dataclass(frozen=True)
