@@ -122,6 +122,9 @@ def test_missing_table(db_file, tmp_path):
     ("UPDATE build_parameters SET value = '0' WHERE key = 'k'", 'k must be'),
     ('UPDATE region_poses SET pose = 99 WHERE pose = 0', 'out of range'),
     ("UPDATE model_view_features SET keypoints = x'00'", 'do not hold'),
+    ("UPDATE visibility SET class_ids = x'000000' WHERE pose = 0", 'int32'),
+    ("UPDATE visibility SET class_ids = x'ff000000' WHERE pose = 0", 'class out of range'),
+    ('DELETE FROM visibility WHERE pose = 4', 'poses 0..8'),
 ])
 def test_inconsistent_contents(db_file, tmp_path, statement, message):
     path = edited_copy(db_file, tmp_path / 'edited.db', statement)

@@ -159,9 +159,14 @@ def _insert_classes(connection: sqlite3.Connection, classes: FeatureClasses) -> 
     blobs = (row.tobytes() for row in classes.descriptors)
     connection.executemany('INSERT INTO class_descriptors VALUES (?, ?, ?)',
                            zip(owners.tolist(), ordinals.tolist(), blobs))
-    pose_of = np.repeat(np.arange(visibility.shape[0]), np.diff(visibility.indptr))
+    if classes.n_classes > np.iinfo(np.int32).max:
+        raise LandmarkDbError(f'{classes.n_classes} classes do not fit the int32 '
+                              f'visibility lists')
+    ids = visibility.indices.astype('<i4')
+    bounds = visibility.indptr.tolist()
     connection.executemany('INSERT INTO visibility VALUES (?, ?)',
-                           zip(pose_of.tolist(), visibility.indices.tolist()))
+                           ((pose, ids[bounds[pose]:bounds[pose + 1]].tobytes())
+                            for pose in range(visibility.shape[0])))
 
 
 def _insert_regions(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
@@ -263,7 +268,7 @@ _COUNT_QUERIES = {
     'edges': 'SELECT COUNT(*) FROM edges',
     'classes': 'SELECT COUNT(*) FROM classes',
     'class_descriptors': 'SELECT COUNT(*) FROM class_descriptors',
-    'visibility': 'SELECT COUNT(*) FROM visibility',
+    'visibility': 'SELECT COALESCE(SUM(length(class_ids)), 0) / 4 FROM visibility',
     'regions': 'SELECT COUNT(*) FROM regions',
     'region_poses': 'SELECT COUNT(*) FROM region_poses',
     'landmark_features': "SELECT COUNT(*) FROM region_features WHERE role = 'landmark'",
@@ -449,12 +454,18 @@ def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjac
         raise LandmarkDbError('class descriptor counts differ from the classes table')
     descriptors = np.frombuffer(b''.join(blobs), dtype=np.uint8).reshape(-1, DESCRIPTOR_SIZE)
     offsets = np.concatenate([[0], np.cumsum(per_class)]).astype(np.int64)
-    pairs = _array(connection, 'SELECT pose, class_id FROM visibility', np.int64, 2)
-    if pairs.size and (pairs[:, 0].max() >= n or pairs[:, 1].max() >= n_classes
-                       or pairs.min() < 0):
-        raise LandmarkDbError('visibility holds a pose or class out of range')
-    visibility = sp.csr_matrix((np.ones(pairs.shape[0], dtype=bool),
-                                (pairs[:, 0], pairs[:, 1])), shape=(n, n_classes))
+    rows = connection.execute('SELECT pose, class_ids FROM visibility ORDER BY pose'
+                              ).fetchall()
+    if [row[0] for row in rows] != list(range(n)):
+        raise LandmarkDbError(f'visibility does not list poses 0..{n - 1}')
+    if any(len(row[1]) % 4 for row in rows):
+        raise LandmarkDbError('a visibility list is not a whole number of int32 ids')
+    indices = np.frombuffer(b''.join(row[1] for row in rows), dtype='<i4').astype(np.int64)
+    indptr = np.concatenate([[0], np.cumsum([len(row[1]) // 4 for row in rows])])
+    if indices.size and (indices.min() < 0 or indices.max() >= n_classes):
+        raise LandmarkDbError('visibility holds a class out of range')
+    visibility = sp.csr_matrix((np.ones(indices.size, dtype=bool), indices,
+                                indptr.astype(np.int64)), shape=(n, n_classes))
     classes = FeatureClasses(descriptors, offsets, visibility)
 
     regions = _load_regions(connection)
