@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from landmark_db.bench.reference import THESIS_TABLE_8_4
+from landmark_db.defaults import POSE_SPACING
 
 __all__ = ['calibrate', 'format_calibration']
 
@@ -32,7 +33,7 @@ def _measure(task: tuple[int, int, float]) -> dict[str, Any]:
 
 
 def calibrate(settings: tuple[int, ...] = (1, 2, 3, 4), worlds: int = 20, seed: int = 0,
-              spacing: float = 0.5, processes: int = 2) -> list[dict[str, Any]]:
+              spacing: float = POSE_SPACING, processes: int = 2) -> list[dict[str, Any]]:
     """Measure the mean visible count per setting and the density that meets Table 8.4.
 
     Args:

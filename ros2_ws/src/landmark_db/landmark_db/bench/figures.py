@@ -8,6 +8,7 @@ import numpy as np
 
 from landmark_db.bench.reference import THESIS_TABLE_8_2, THESIS_TABLE_8_3
 from landmark_db.bench.runner import FULL, WorldOutcome
+from landmark_db.defaults import THESIS
 
 __all__ = ['plot_bar_chart', 'plot_k_rho_sweep', 'plot_world_decompositions']
 
@@ -56,7 +57,8 @@ def plot_bar_chart(summary: dict[str, Any], algorithms: list[str], path: str | P
         ax.grid(axis='y', alpha=0.3)
     axes[0].legend(fontsize=8, ncol=2)
     worlds = sorted({c['runs'] for c in cells.values()})
-    fig.suptitle(f'Decomposition of synthetic worlds (k=4, rho=1, sigma=9; '
+    fig.suptitle(f'Decomposition of synthetic worlds (k={THESIS.k}, rho={THESIS.rho}, '
+                 f'sigma={THESIS.sigma}; '
                  f'{worlds[0] if worlds else 0} worlds per setting; black ticks: thesis)',
                  fontsize=11)
     fig.tight_layout()

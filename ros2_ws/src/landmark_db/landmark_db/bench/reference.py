@@ -7,11 +7,14 @@ worlds per setting with k = 4, rho = 1, sigma = 9 and alpha = 0.85.
 """
 from __future__ import annotations
 
+from landmark_db.defaults import THESIS
+
 __all__ = ['THESIS_ALGORITHMS', 'THESIS_PARAMETERS', 'THESIS_TABLE_8_2', 'THESIS_TABLE_8_3',
            'THESIS_TABLE_8_4', 'THESIS_WORLDS_PER_SETTING']
 
 THESIS_ALGORITHMS = ('A1', 'A2', 'A3', 'B1', 'B2', 'C')
-THESIS_PARAMETERS = {'k': 4, 'rho': 1, 'sigma': 9, 'alpha': 0.85}
+THESIS_PARAMETERS = {'k': THESIS.k, 'rho': THESIS.rho, 'sigma': THESIS.sigma,
+                     'alpha': THESIS.alpha}
 THESIS_WORLDS_PER_SETTING = 300
 
 # Table 8.2: average number of regions in a decomposition.

@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from landmark_db.defaults import POSE_SPACING, THESIS
+
 __all__ = ['BenchConfig', 'RunRecord', 'WorldOutcome', 'decomposition_rng', 'records_as_dicts',
            'run_benchmark', 'run_world']
 
@@ -44,7 +46,7 @@ class BenchConfig:
         worlds: full-size worlds per setting (the thesis used 300).
         seed: base seed; world ``i`` of setting ``s`` is ``simulate_world(s, seed + i)``.
         algorithms: the algorithms of the main tables.
-        k, rho, sigma, alpha: decomposition parameters (the thesis's 4, 1, 9, 0.85).
+        k, rho, sigma, alpha: decomposition parameters (the thesis's, ``defaults.THESIS``).
         spacing: pose grid spacing, metres.
         reduced: run the main tables on reduced-size worlds (fast tests).
         small_worlds: reduced-size worlds per setting for the approximation ratios
@@ -61,11 +63,11 @@ class BenchConfig:
     worlds: int = 300
     seed: int = 0
     algorithms: tuple[str, ...] = ('A1', 'A2', 'A3', 'B1', 'B2', 'C', 'best')
-    k: int = 4
-    rho: int = 1
-    sigma: int = 9
-    alpha: float = 0.85
-    spacing: float = 0.5
+    k: int = THESIS.k
+    rho: int = THESIS.rho
+    sigma: int = THESIS.sigma
+    alpha: float = THESIS.alpha
+    spacing: float = POSE_SPACING
     reduced: bool = False
     small_worlds: int = 10
     small_sigma: int = 0

@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from landmark_db.defaults import POSE_SPACING, THESIS
+
 __all__ = ['DEFAULT_SIZES', 'format_scaling', 'run_scaling', 'scaling_world']
 
 _LOG = logging.getLogger(__name__)
@@ -23,7 +25,8 @@ _LOG = logging.getLogger(__name__)
 DEFAULT_SIZES = ((5_000, 2_000), (20_000, 4_000), (50_000, 7_000), (100_000, 10_000))
 
 
-def scaling_world(n_poses: int, n_features: int, seed: int = 0, spacing: float = 0.5) -> Any:
+def scaling_world(n_poses: int, n_features: int, seed: int = 0,
+                  spacing: float = POSE_SPACING) -> Any:
     """Generate a world with about ``n_poses`` poses and exactly ``n_features`` features.
 
     Returns:
@@ -57,8 +60,9 @@ def scaling_world(n_poses: int, n_features: int, seed: int = 0, spacing: float =
 
 
 def run_scaling(sizes: tuple[tuple[int, int], ...] = DEFAULT_SIZES,
-                algorithms: tuple[str, ...] = ('B2',), k: int = 4, rho: int = 1,
-                sigma: int = 9, alpha: float = 0.85, seed: int = 0,
+                algorithms: tuple[str, ...] = ('B2',), k: int = THESIS.k,
+                rho: int = THESIS.rho, sigma: int = THESIS.sigma, alpha: float = THESIS.alpha,
+                seed: int = 0,
                 progress: Any = None) -> list[dict[str, Any]]:
     """Time the algorithms on worlds of growing size.
 
@@ -112,7 +116,8 @@ def run_scaling(sizes: tuple[tuple[int, int], ...] = DEFAULT_SIZES,
 
 def format_scaling(rows: list[dict[str, Any]]) -> str:
     """Format :func:`run_scaling`'s rows as a text table."""
-    lines = ['Scaling run (setting-2-like worlds, k=4, rho=1, sigma=9)',
+    lines = [f'Scaling run (setting-2-like worlds, k={THESIS.k}, rho={THESIS.rho}, '
+             f'sigma={THESIS.sigma})',
              f"{'poses':>8} {'features':>8} {'visible/pose':>12} {'simulate s':>10} "
              f"{'algorithm':>9} {'wall s':>8} {'CPU s':>8} {'regions':>7} {'valid':>5}"]
     for r in rows:

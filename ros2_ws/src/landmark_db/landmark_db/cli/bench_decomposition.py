@@ -5,6 +5,8 @@ import argparse
 import logging
 from pathlib import Path
 
+from landmark_db.defaults import THESIS
+
 __all__ = ['register', 'run']
 
 _LOG = logging.getLogger(__name__)
@@ -16,8 +18,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         'bench-decomposition',
         help='benchmark the decomposition algorithms on random worlds (Tables 8.2-8.4)',
         description='Generate random worlds of the four settings of thesis Section 8.2, '
-                    'decompose each with A1, A2, A3, B1, B2, C and best (k=4, rho=1, '
-                    'sigma=9, alpha=0.85), validate every decomposition, and print our '
+                    f'decompose each with A1, A2, A3, B1, B2, C and best (k={THESIS.k}, '
+                    f'rho={THESIS.rho}, sigma={THESIS.sigma}, alpha={THESIS.alpha}), '
+                    'validate every decomposition, and print our '
                     "Tables 8.2-8.4 beside the thesis's, the time per algorithm, the "
                     'improvement of best over B2 and, on reduced-size worlds, every '
                     "heuristic's approximation ratio against the exact optimum. Writes "

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 
+from landmark_db.defaults import DECOMPOSITION
+
 __all__ = ['register', 'run']
 
 _ALGORITHMS = ('A1', 'A2', 'A3', 'B1', 'B2', 'C', 'exact', 'best')
@@ -25,20 +27,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--algorithm', required=True, choices=_ALGORITHMS,
                         help='decomposition algorithm')
     parser.add_argument('--k', type=int, required=True, help='features per landmark (>= 1)')
-    parser.add_argument('--rho', type=int, default=0,
+    parser.add_argument('--rho', type=int, default=DECOMPOSITION.rho,
                         help='overlap: graph radius every pose needs inside one region '
-                             '(default: 0)')
-    parser.add_argument('--sigma', type=int, default=0,
+                             f'(default: {DECOMPOSITION.rho})')
+    parser.add_argument('--sigma', type=int, default=DECOMPOSITION.sigma,
                         help='add a region only if it covers more than SIGMA otherwise '
-                             'uncovered poses (default: 0, a complete decomposition)')
-    parser.add_argument('--alpha', type=float, default=0.85,
+                             f'uncovered poses (default: {DECOMPOSITION.sigma}, a complete '
+                             'decomposition)')
+    parser.add_argument('--alpha', type=float, default=DECOMPOSITION.alpha,
                         help="algorithm C's least unassigned fraction of a neighbourhood "
-                             '(default: 0.85)')
-    parser.add_argument('--seed', type=int, default=0,
-                        help='seed of the tie-breaking random generator (default: 0)')
+                             f'(default: {DECOMPOSITION.alpha})')
+    parser.add_argument('--seed', type=int, default=DECOMPOSITION.seed,
+                        help='seed of the tie-breaking random generator '
+                             f'(default: {DECOMPOSITION.seed})')
     parser.add_argument('--time-limit', type=float, default=None, metavar='SECONDS',
-                        help='set-cover solver time limit for exact (default 60) and best '
-                             '(default 5)')
+                        help='set-cover solver time limit for exact (default '
+                             f'{DECOMPOSITION.exact_time_limit:g}) and best (default '
+                             f'{DECOMPOSITION.best_time_limit:g})')
     parser.add_argument('--out', required=True, metavar='DECOMP.json',
                         help='decomposition JSON to write')
     parser.set_defaults(func=run)

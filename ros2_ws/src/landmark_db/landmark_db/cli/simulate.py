@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import logging
 
+from landmark_db.defaults import POSE_SPACING
+
 __all__ = ['register', 'run']
 
 _LOG = logging.getLogger(__name__)
@@ -27,8 +29,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='world instance JSON to write')
     parser.add_argument('--scene-out', metavar='SCENE.json',
                         help='also write the polygon scene (perimeter, obstacles, features)')
-    parser.add_argument('--spacing', type=float, default=0.5,
-                        help='pose grid spacing in metres (default: 0.5, as in the thesis)')
+    parser.add_argument('--spacing', type=float, default=POSE_SPACING,
+                        help=f'pose grid spacing in metres (default: {POSE_SPACING}, as in the '
+                             'thesis)')
     parser.add_argument('--small', action='store_true',
                         help='a reduced-size world (about 10 m across) of the same setting, '
                              'small enough for the exact solver')

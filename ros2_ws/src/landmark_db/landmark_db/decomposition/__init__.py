@@ -42,6 +42,7 @@ from landmark_db.decomposition.overlap import (
 )
 from landmark_db.decomposition.problem import ZeroProblem, ZeroRegion, zero_problem
 from landmark_db.decomposition.validate import validate
+from landmark_db.defaults import DECOMPOSITION
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
 
@@ -60,8 +61,9 @@ ALGORITHMS = ('A1', 'A2', 'A3', 'B1', 'B2', 'C', 'exact', 'best')
 _LOG = logging.getLogger(__name__)
 
 
-def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = 0, sigma: int = 0,
-              alpha: float = 0.85, rng: Any = None, **options: Any) -> Decomposition:
+def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = DECOMPOSITION.rho,
+              sigma: int = DECOMPOSITION.sigma, alpha: float = DECOMPOSITION.alpha,
+              rng: Any = None, **options: Any) -> Decomposition:
     """Decompose a world into regions with k-feature landmarks (rho-MORDP).
 
     Args:
@@ -72,7 +74,8 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = 0, sigma:
         sigma: a region is added only if it covers more than sigma otherwise
             uncovered poses (>= 0; Section 5.5).
         alpha: algorithm C's least unassigned fraction of N_r(v), in (0, 1].
-        rng: ``numpy.random.Generator`` or seed for tie-breaking; None means seed 0.
+        rng: ``numpy.random.Generator`` or seed for tie-breaking; None means
+            ``DECOMPOSITION.seed`` (0).
         **options: passed to ``exact`` (``time_limit``, ``max_subsets``,
             ``max_candidates``) or ``best`` (``time_limit``, ``rounds``).
 
@@ -103,7 +106,7 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = 0, sigma:
             not math.isfinite(alpha) or not 0 < alpha <= 1:
         raise LandmarkDbError(f'alpha must be in (0, 1], got {alpha!r}')
     generator = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(
-        0 if rng is None else rng)
+        DECOMPOSITION.seed if rng is None else rng)
     start = time.perf_counter()
     problem = zero_problem(world, k, rho, sigma, generator)
     reduced = _run(problem, algorithm, float(alpha), options) if problem.coverable.any() \

@@ -57,6 +57,7 @@ from landmark_db.decomposition.set_cover import (
     solve_set_cover,
 )
 from landmark_db.decomposition.shrink_regions import shrink_regions
+from landmark_db.defaults import DECOMPOSITION
 from landmark_db.errors import LandmarkDbError
 
 __all__ = ['best_cover']
@@ -74,8 +75,9 @@ COVER_NODES = 2000  # the complete cover (sigma = 0): usually solved at the root
 LP_METHOD = 'highs-ds'
 
 
-def best_cover(problem: ZeroProblem, alpha: float = 0.85, time_limit: float = 5.0,
-               multiplicity: int = 5, max_seeds: int | None = None, merge_rounds: int = 3,
+def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
+               time_limit: float = DECOMPOSITION.best_time_limit, multiplicity: int = 5,
+               max_seeds: int | None = None, merge_rounds: int = 3,
                ) -> list[ZeroRegion]:
     """Run the ``best`` heuristic on a 0-MORDP instance.
 

@@ -28,6 +28,7 @@ import numpy as np
 
 from landmark_db.decomposition.problem import ZeroProblem, ZeroRegion, split_components
 from landmark_db.decomposition.set_cover import solve_set_cover
+from landmark_db.defaults import DECOMPOSITION
 from landmark_db.errors import LandmarkDbError
 
 __all__ = ['candidate_regions', 'exact_cover']
@@ -86,7 +87,7 @@ def candidate_regions(problem: ZeroProblem, max_subsets: int = MAX_SUBSETS,
     return list(candidates.values())
 
 
-def exact_cover(problem: ZeroProblem, time_limit: float = 60.0,
+def exact_cover(problem: ZeroProblem, time_limit: float = DECOMPOSITION.exact_time_limit,
                 max_subsets: int = MAX_SUBSETS,
                 max_candidates: int = MAX_CANDIDATES) -> list[ZeroRegion]:
     """Return an optimum 0-MORDP decomposition (complete cover, sigma ignored).
