@@ -15,11 +15,11 @@ ever breaking the ``odom -> base_link`` chain owned by odometry.
 from __future__ import annotations
 
 from dataclasses import dataclass
-import math
 
 import numpy as np
 
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.geometry.frames import quaternion_yaw, yaw_quaternion
 
 __all__ = ['StampedTransform', 'compose', 'correction', 'inverse', 'quaternion_multiply',
            'rotate']
@@ -84,15 +84,12 @@ class StampedTransform:
     def planar(cls, stamp_ns: int, parent: str, child: str, x: float, y: float,
                yaw: float) -> StampedTransform:
         """Return a transform in the ground plane: translation ``(x, y, 0)``, yaw about z."""
-        half = 0.5 * yaw
-        return cls(stamp_ns, parent, child, np.array([x, y, 0.0]),
-                   np.array([0.0, 0.0, math.sin(half), math.cos(half)]))
+        return cls(stamp_ns, parent, child, np.array([x, y, 0.0]), yaw_quaternion(yaw))
 
     @property
     def yaw(self) -> float:
         """Heading about z in radians (the planar part of the rotation)."""
-        x, y, z, w = self.rotation
-        return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        return float(quaternion_yaw(self.rotation))
 
 
 def compose(a: StampedTransform, b: StampedTransform) -> StampedTransform:
