@@ -9,8 +9,19 @@ import numpy as np
 import pytest
 
 from landmark_db.bench.reference import THESIS_TABLE_8_2, THESIS_TABLE_8_3, THESIS_TABLE_8_4
-from landmark_db.bench.report import approximation_ratios, improvement_over_b2, summarize
-from landmark_db.bench.runner import SMALL, BenchConfig, RunRecord, run_benchmark
+from landmark_db.bench.report import (
+    approximation_ratios,
+    improvement_over_b2,
+    summarize,
+)
+from landmark_db.bench.runner import (
+    REDUCED,
+    SMALL,
+    BenchConfig,
+    RunRecord,
+    planned_worlds,
+    run_benchmark,
+)
 from landmark_db.cli import bench_decomposition
 from landmark_db.errors import LandmarkDbError
 
@@ -28,7 +39,11 @@ def test_bench_end_to_end_writes_tables_results_and_figures(tmp_path: Path,
     args = _parse(['--worlds', '1', '--settings', '2', '--reduced', '--small-worlds', '1',
                    '--algorithms', 'A1,B2,C', '--processes', '1', '--out', str(tmp_path)])
     assert args.func(args) == 0
-    out = capsys.readouterr().out
+    captured = capsys.readouterr()
+    out = captured.out
+    # Progress: one world of the main tables and one small world, counted apart.
+    assert 'worlds (reduced size): 100%' in captured.err and '1/1' in captured.err
+    assert 'small worlds (with exact): 100%' in captured.err
     assert 'Table 8.2' in out and 'Table 8.3' in out and 'Table 8.4' in out
     # The thesis's numbers are printed beside ours.
     assert f"[{THESIS_TABLE_8_2[2]['B2']:.2f}]" in out
@@ -104,6 +119,17 @@ def test_summary_improvement_and_ratios_by_hand() -> None:
     assert ratios['B2']['max'] == pytest.approx(1.25)
     assert ratios['B2']['optimal_share'] == pytest.approx(0.5)
     assert ratios['exact']['mean_regions'] == pytest.approx(4.5)
+
+
+def test_progress_counts_worlds_and_small_worlds_separately() -> None:
+    # Regression: the '--worlds' counter's total included the small worlds.
+    config = BenchConfig(settings=(3, 4), worlds=2, reduced=True, small_worlds=1,
+                         algorithms=('B1',), processes=1)
+    assert planned_worlds(config) == {REDUCED: 4, SMALL: 2}
+    calls: list[tuple[str, int, int]] = []
+    run_benchmark(config, progress=lambda *call: calls.append(call))
+    assert calls == [(REDUCED, 1, 4), (REDUCED, 2, 4), (REDUCED, 3, 4), (REDUCED, 4, 4),
+                     (SMALL, 1, 2), (SMALL, 2, 2)]
 
 
 def test_reference_tables_are_complete() -> None:

@@ -27,14 +27,16 @@ import numpy as np
 
 from landmark_db.defaults import POSE_SPACING, THESIS
 
-__all__ = ['BenchConfig', 'RunRecord', 'WorldOutcome', 'decomposition_rng', 'records_as_dicts',
-           'run_benchmark', 'run_world']
+__all__ = ['WORLD_CLASS_LABELS', 'BenchConfig', 'RunRecord', 'WorldOutcome', 'decomposition_rng',
+           'planned_worlds', 'records_as_dicts', 'run_benchmark', 'run_world']
 
 _LOG = logging.getLogger(__name__)
 
 FULL = 'full'  # full-size worlds of the main tables
 REDUCED = 'reduced'  # reduced-size worlds of the main tables (quick runs, tests)
 SMALL = 'small'  # reduced-size worlds of the approximation ratios (with the exact optimum)
+WORLD_CLASS_LABELS = {FULL: 'worlds', REDUCED: 'worlds (reduced size)',
+                      SMALL: 'small worlds (with exact)'}
 
 
 @dataclass(frozen=True)
@@ -213,13 +215,28 @@ def _tasks(config: BenchConfig) -> list[tuple[Any, ...]]:
     return tasks
 
 
+def planned_worlds(config: BenchConfig) -> dict[str, int]:
+    """Return how many worlds of each class the benchmark runs, in running order.
+
+    Returns:
+        ``{FULL or REDUCED: settings x worlds, SMALL: settings x small_worlds}`` (the
+        small class only when ``small_worlds > 0``).
+    """
+    counts: dict[str, int] = {}
+    for task in _tasks(config):
+        counts[task[1]] = counts.get(task[1], 0) + 1
+    return counts
+
+
 def run_benchmark(config: BenchConfig, progress: Any = None) -> tuple[list[RunRecord],
                                                                       dict[int, WorldOutcome]]:
     """Run the whole benchmark.
 
     Args:
         config: what to run.
-        progress: optional ``callable(done, total, outcome)`` called after each world.
+        progress: optional ``callable(world_class, done, total)`` called after each
+            world, counting within its class (main-table worlds and the small worlds
+            of the approximation ratios separately, see :func:`planned_worlds`).
 
     Returns:
         ``(records, figure_worlds)``: all records in task order, and for each setting
@@ -240,12 +257,18 @@ def run_benchmark(config: BenchConfig, progress: Any = None) -> tuple[list[RunRe
 
 def _collect(tasks: list[tuple[Any, ...]], outcomes: Any, records: list[RunRecord],
              figure_worlds: dict[int, WorldOutcome], progress: Any) -> None:
-    for done, (task, outcome) in enumerate(zip(tasks, outcomes), start=1):
+    totals: dict[str, int] = {}
+    for task in tasks:
+        totals[task[1]] = totals.get(task[1], 0) + 1
+    done: dict[str, int] = dict.fromkeys(totals, 0)
+    for task, outcome in zip(tasks, outcomes):
         records.extend(outcome.records)
         if task[-1]:
             figure_worlds[task[2]] = outcome
+        world_class = task[1]
+        done[world_class] += 1
         if progress is not None:
-            progress(done, len(tasks), outcome)
+            progress(world_class, done[world_class], totals[world_class])
 
 
 def records_as_dicts(records: list[RunRecord]) -> list[dict[str, Any]]:

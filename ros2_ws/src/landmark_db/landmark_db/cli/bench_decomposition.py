@@ -2,8 +2,11 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
 import logging
 from pathlib import Path
+from typing import Any
 
 from landmark_db.defaults import THESIS
 
@@ -109,10 +112,19 @@ def run(args: argparse.Namespace) -> int:
         bad = [a for a in scaling_algorithms if a not in ALGORITHMS]
         if bad:
             raise LandmarkDbError(f'unknown algorithm(s) {bad} in --scaling-algorithms')
-        rows = run_scaling(algorithms=scaling_algorithms, seed=args.seed,
-                           progress=lambda r: print(
-                               f"  {r['poses']} poses, {r['features']} features: "
-                               f"{r['algorithm']} {r['seconds']:.2f} s", file=sys.stderr))
+        from tqdm import tqdm
+
+        from landmark_db.bench.scaling import DEFAULT_SIZES
+
+        with tqdm(total=len(DEFAULT_SIZES) * len(scaling_algorithms), desc='scaling runs',
+                  unit='run', file=sys.stderr) as bar:
+            def progress(row: dict[str, object]) -> None:
+                bar.write(f"  {row['poses']} poses, {row['features']} features: "
+                          f"{row['algorithm']} {row['seconds']:.2f} s", file=sys.stderr)
+                bar.update()
+
+            rows = run_scaling(algorithms=scaling_algorithms, seed=args.seed,
+                               progress=progress)
         text = format_scaling(rows)
         print(text)
         write_text_atomic(out / 'scaling.txt', text + '\n')
@@ -138,7 +150,9 @@ def run(args: argparse.Namespace) -> int:
     from landmark_db.bench.runner import (
         FULL,
         REDUCED,
+        WORLD_CLASS_LABELS,
         BenchConfig,
+        planned_worlds,
         records_as_dicts,
         run_benchmark,
     )
@@ -148,11 +162,9 @@ def run(args: argparse.Namespace) -> int:
                          algorithms=algorithms, reduced=args.reduced,
                          small_worlds=args.small_worlds, processes=args.processes)
 
-    def progress(done: int, total: int, outcome: object) -> None:
-        if done == total or done % max(1, total // 20) == 0:
-            print(f'  {done}/{total} worlds', file=sys.stderr, flush=True)
-
-    records, figure_worlds = run_benchmark(config, progress=progress)
+    with _world_bars(planned_worlds(config), WORLD_CLASS_LABELS) as bars:
+        records, figure_worlds = run_benchmark(
+            config, progress=lambda world_class, done, total: bars[world_class].update())
     summary = summarize(records)
     main_class = REDUCED if config.reduced else FULL
     text = format_report(summary, records, list(algorithms), main_class=main_class)
@@ -201,6 +213,23 @@ def run(args: argparse.Namespace) -> int:
               f"{'; '.join(row['problems'][:2])}", file=sys.stderr)
     print(f'wrote {out}/results.json, results.csv, tables.txt and figures', file=sys.stderr)
     return 0 if all(r.valid for r in records) and not sweep_problems else 1
+
+
+@contextmanager
+def _world_bars(planned: dict[str, int], labels: dict[str, str]) -> Iterator[dict[str, Any]]:
+    """One tqdm bar per world class: the main tables' worlds, then the small worlds."""
+    import sys
+
+    from tqdm import tqdm
+
+    bars = {world_class: tqdm(total=total, desc=labels.get(world_class, world_class),
+                              unit='world', position=index, file=sys.stderr)
+            for index, (world_class, total) in enumerate(planned.items())}
+    try:
+        yield bars
+    finally:
+        for bar in bars.values():
+            bar.close()
 
 
 def _int_list(text: str, name: str) -> tuple[int, ...]:
