@@ -11,6 +11,7 @@ import pytest
 from landmark_db.bench.reference import THESIS_TABLE_8_2, THESIS_TABLE_8_3, THESIS_TABLE_8_4
 from landmark_db.bench.report import (
     approximation_ratios,
+    format_report,
     improvement_over_b2,
     summarize,
 )
@@ -119,6 +120,20 @@ def test_summary_improvement_and_ratios_by_hand() -> None:
     assert ratios['B2']['max'] == pytest.approx(1.25)
     assert ratios['B2']['optimal_share'] == pytest.approx(0.5)
     assert ratios['exact']['mean_regions'] == pytest.approx(4.5)
+
+
+def test_report_says_fewer_or_more_regions_not_a_backwards_sign() -> None:
+    # Regression: 'best' with fewer regions than B2 was printed as '+10.0%'.
+    fewer = summarize([_record('B2', 10, 0), _record('best', 9, 0)])
+    line = next(x for x in format_report(fewer, [], ['B2', 'best']).splitlines()
+                if "'best' against B2" in x)
+    assert line == ("Regions of the new heuristic 'best' against B2: setting 1: 10.0 % fewer; "
+                    'mean over settings 10.0 % fewer')
+    more = summarize([_record('B2', 10, 0), _record('best', 11, 0)])
+    line = next(x for x in format_report(more, [], ['B2', 'best']).splitlines()
+                if "'best' against B2" in x)
+    assert '+' not in line and line.endswith('setting 1: 10.0 % more; '
+                                             'mean over settings 10.0 % more')
 
 
 def test_progress_counts_worlds_and_small_worlds_separately() -> None:

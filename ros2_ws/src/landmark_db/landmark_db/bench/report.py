@@ -67,7 +67,8 @@ def improvement_over_b2(summary: dict[str, Any], algorithm: str = 'best',
     """Percent fewer regions of ``algorithm`` than B2, per setting and averaged.
 
     Returns:
-        ``{'1': pct, ..., 'mean': pct}`` (settings where both ran).
+        ``{'1': pct, ..., 'mean': pct}`` (settings where both ran): positive when
+        ``algorithm`` needs fewer regions than B2, negative when it needs more.
     """
     cell = _cell_index(summary)
     out: dict[str, float] = {}
@@ -160,9 +161,10 @@ def format_report(summary: dict[str, Any], records: list[RunRecord], algorithms:
     lines.append('')
     improvement = improvement_over_b2(summary, world_class=main_class)
     if improvement:
-        per = ', '.join(f'setting {k}: {v:+.1f}%' for k, v in improvement.items() if k != 'mean')
-        lines.append(f"New heuristic 'best' vs B2, fewer regions: {per}; "
-                     f"mean over settings {improvement['mean']:+.1f}%")
+        per = ', '.join(f'setting {k}: {_fewer_or_more(v)}' for k, v in improvement.items()
+                        if k != 'mean')
+        lines.append(f"Regions of the new heuristic 'best' against B2: {per}; "
+                     f"mean over settings {_fewer_or_more(improvement['mean'])}")
         lines.append('')
     ratios = approximation_ratios(records)
     if ratios:
@@ -191,6 +193,15 @@ def format_report(summary: dict[str, Any], records: list[RunRecord], algorithms:
     else:
         lines.append(f'All {len(records)} decompositions passed the validator.')
     return '\n'.join(lines)
+
+
+def _fewer_or_more(percent: float) -> str:
+    """Say ``'8.1 % fewer'`` or ``'2.0 % more'`` rather than a sign that reads backwards."""
+    if percent > 0:
+        return f'{percent:.1f} % fewer'
+    if percent < 0:
+        return f'{-percent:.1f} % more'
+    return 'as many'
 
 
 def _crashed(record: RunRecord) -> bool:
