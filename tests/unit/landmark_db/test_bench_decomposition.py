@@ -166,3 +166,22 @@ def test_scaling_world_meets_its_targets() -> None:
     rows = run_scaling(((1_000, 300),), algorithms=('B2',))
     assert rows[0]['valid'] and rows[0]['regions'] > 0
     assert 'B2' in format_scaling(rows)
+
+
+def test_scaling_and_calibration_write_their_files(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    from landmark_db.bench import scaling
+
+    monkeypatch.setattr(scaling, 'DEFAULT_SIZES', ((600, 200),))
+    args = _parse(['--scaling', '--scaling-algorithms', 'B1,B2', '--out', str(tmp_path)])
+    assert args.func(args) == 0
+    err = capsys.readouterr().err
+    assert 'scaling runs: 100%' in err and '2/2' in err
+    rows = json.loads((tmp_path / 'scaling.json').read_text())
+    assert [r['algorithm'] for r in rows] == ['B1', 'B2'] and all(r['valid'] for r in rows)
+    assert (tmp_path / 'scaling.txt').read_text().startswith('Scaling run')
+    args = _parse(['--calibrate', '--worlds', '1', '--settings', '4', '--processes', '1',
+                   '--out', str(tmp_path)])
+    assert args.func(args) == 0
+    assert [r['setting'] for r in json.loads((tmp_path / 'calibration.json').read_text())] == [4]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith('.')) == []

@@ -123,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
                           f"{row['algorithm']} {row['seconds']:.2f} s", file=sys.stderr)
                 bar.update()
 
-            rows = run_scaling(algorithms=scaling_algorithms, seed=args.seed,
+            rows = run_scaling(DEFAULT_SIZES, algorithms=scaling_algorithms, seed=args.seed,
                                progress=progress)
         text = format_scaling(rows)
         print(text)
