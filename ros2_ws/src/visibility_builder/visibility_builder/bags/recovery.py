@@ -40,7 +40,7 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Schema
-from mcap.stream_reader import StreamReader, get_chunk_data_stream
+from mcap.stream_reader import get_chunk_data_stream
 from rosbags.interfaces import Qos
 import zstandard
 
@@ -69,6 +69,7 @@ MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 _HEAD = struct.Struct('<BQ')  # a record's opcode and body length
 _LAST_OPCODE = 0x10  # highest opcode of MCAP v0 (0x80 and above: user records)
+_CHUNK_FIXED = 28  # a chunk record's fields before its compression name
 
 #: What a damaged record can raise while it is parsed or decompressed (a garbage
 #: length field can make a parser try to allocate or index far beyond the file).
@@ -416,14 +417,31 @@ def summary_channels(file: Path) -> dict[int, McapChannel]:
 
 
 def chunk_compressions(file: Path) -> set[str]:
-    """Return the compressions of an intact MCAP file's chunks (``''``: uncompressed).
+    """Return the compressions of an MCAP file's chunks (``''``: uncompressed).
 
-    The summary's chunk indexes name them; a file without them is read through.
+    The summary's chunk indexes name them; when the file has no readable summary,
+    the chunk records' headers do.
     """
-    with file.open('rb') as stream:
-        summary = make_reader(stream).get_summary()
+    try:
+        with file.open('rb') as stream:
+            summary = make_reader(stream).get_summary()
         if summary is not None and summary.chunk_indexes:
             return {index.compression for index in summary.chunk_indexes}
-        stream.seek(0)
-        return {record.compression for record in StreamReader(stream, emit_chunks=True).records
-                if isinstance(record, Chunk)}
+    except _RECORD_ERRORS:
+        pass
+    kinds = set()
+    size = file.stat().st_size
+    with file.open('rb') as stream:
+        for head in _heads(stream, size, len(MCAP_MAGIC)):
+            if head.opcode is None or head.opcode == Opcode.FOOTER:
+                break
+            if head.opcode != Opcode.CHUNK:
+                continue
+            # Only the header: start and end time, uncompressed size and CRC, compression.
+            header = _fields(stream.read(min(head.length, _CHUNK_FIXED + 4 + 64)))
+            try:
+                header.read(_CHUNK_FIXED)
+                kinds.add(header.read_prefixed_string())
+            except _RECORD_ERRORS:
+                continue
+    return kinds
