@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from datetime import UTC, datetime, timedelta
 from functools import cached_property
+import hashlib
 import json
 import math
 from pathlib import Path
@@ -203,6 +204,29 @@ class BuildInfo(_ArrayEquality):
             raise LandmarkDbError(
                 f'decomposition_seconds must be a non-negative number, got {seconds!r}')
         _set(self, 'decomposition_seconds', float(seconds))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return a JSON-ready dict of every field (``camera`` as its own dict)."""
+        values = {f.name: getattr(self, f.name) for f in fields(self)}
+        values['camera'] = self.camera.to_dict()
+        return values
+
+    @staticmethod
+    def from_dict(data: Any) -> BuildInfo:
+        """Build from :meth:`to_dict`'s structure.
+
+        Raises:
+            LandmarkDbError: on a missing or invalid field.
+        """
+        if not isinstance(data, dict):
+            raise LandmarkDbError('build info must be an object')
+        names = [f.name for f in fields(BuildInfo)]
+        missing = [name for name in names if name not in data]
+        if missing:
+            raise LandmarkDbError(f'build parameter {missing[0]!r} is missing')
+        values = {name: data[name] for name in names}
+        values['camera'] = CameraIntrinsics.from_dict(data['camera'])
+        return BuildInfo(**values)
 
 
 @dataclass(frozen=True, eq=False)
@@ -582,6 +606,46 @@ class LandmarkDatabase(_ArrayEquality):
             shared_count = joining_count = np.zeros(0, dtype=np.int64)
         return RegionAdjacency(pairs.reshape(-1, 2), shared_count.astype(np.int64),
                                joining_count.astype(np.int64))
+
+    def content_digest(self) -> str:
+        """Return a BLAKE2b digest (64 hex digits) of everything the database holds.
+
+        Equal databases have equal digests; the file stores it so that reading detects
+        damage SQLite's own checks cannot see (a changed descriptor byte or coordinate).
+        """
+        digest = hashlib.blake2b(digest_size=32)
+
+        def add(data: bytes | np.ndarray | Any) -> None:
+            if isinstance(data, np.ndarray):
+                chunk = np.ascontiguousarray(data).tobytes()
+                digest.update(f'{data.dtype.str}{data.shape}'.encode())
+            elif isinstance(data, bytes):
+                chunk = data
+            else:
+                chunk = json.dumps(data, sort_keys=True, allow_nan=False).encode()
+            digest.update(len(chunk).to_bytes(8, 'little'))
+            digest.update(chunk)
+
+        add(self.info.to_dict())
+        poses = self.poses
+        for array in (poses.xy, poses.yaw, poses.grid, poses.edges):
+            add(array)
+        add(poses.spacing)
+        classes = self.classes
+        add(classes.descriptors)
+        add(classes.offsets)
+        add(classes.visibility.indptr.astype(np.int64))
+        add(classes.visibility.indices.astype(np.int64))
+        for region in self.regions:
+            for array in (region.poses, region.landmark, region.extra):
+                add(array)
+            for view in region.model_views:
+                add([view.pose, view.image_stamp_ns, view.image_index, view.x, view.y,
+                     view.yaw])
+                for array in (view.class_ids, view.keypoints, view.descriptors):
+                    add(array)
+        add(self.uncovered)
+        return digest.hexdigest()
 
     def to_world_instance(self) -> WorldInstance:
         """Return the world instance: poses, G, and feature id ``c`` = class ``c``."""

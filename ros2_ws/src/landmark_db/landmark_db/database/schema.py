@@ -12,7 +12,8 @@ Tables (all indices are 0-based and equal to the in-memory indices):
 ======================  ==================================================================
 table                   rows
 ======================  ==================================================================
-meta                    ``key, value``: schema_version, application, writer
+meta                    ``key, value``: schema_version, application, writer,
+                        content_digest (BLAKE2b of the contents, checked on opening)
 build_parameters        ``key, value``: one JSON value per :class:`BuildInfo` field, and
                         ``pose_spacing``
 poses                   ``id, x, y, yaw, grid_ix, grid_iy`` (grid -1 off the grid)

@@ -15,13 +15,15 @@ is not SQLite, a truncated or damaged file (``PRAGMA quick_check``), a SQLite fi
 another application (``PRAGMA application_id``), a schema version newer than
 :data:`~.schema.SCHEMA_VERSION`, a missing table, and contents that break the
 invariants of :mod:`.model` or disagree with themselves (counts, the stored region
-graph). Opening never modifies the file.
+graph, the content checksum that catches a changed descriptor byte or coordinate, which
+SQLite's own checks cannot see). Opening never modifies the file.
+:func:`database_summary` makes the file checks but reads only counts and parameters.
 """
 from __future__ import annotations
 
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 import json
 import logging
 import os
@@ -37,7 +39,6 @@ from landmark_db.atomic import atomic_output
 from landmark_db.database.model import (
     DESCRIPTOR_SIZE,
     BuildInfo,
-    CameraIntrinsics,
     FeatureClasses,
     LandmarkDatabase,
     ModelView,
@@ -60,7 +61,9 @@ __all__ = ['DatabaseSummary', 'database_image', 'database_summary', 'open_databa
 _LOG = logging.getLogger(__name__)
 
 _SQLITE_MAGIC = b'SQLite format 3\x00'
-_INFO_FIELDS = tuple(f.name for f in fields(BuildInfo))
+# What damaged file contents raise while read: SQLite errors, undecodable text
+# (UnicodeDecodeError is a ValueError), NULLs or wrong types where numbers belong.
+_DAMAGE = (sqlite3.Error, ValueError, TypeError)
 
 
 # --- writing ------------------------------------------------------------------------
@@ -122,6 +125,7 @@ def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
         ('schema_version', str(SCHEMA_VERSION)),
         ('application', APPLICATION_NAME),
         ('writer', f'landmark_db {__version__}'),
+        ('content_digest', db.content_digest()),
     ])
     _insert_build_parameters(connection, db)
     _insert_poses(connection, db.poses)
@@ -130,9 +134,7 @@ def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
 
 
 def _insert_build_parameters(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
-    info = db.info
-    values = {name: getattr(info, name) for name in _INFO_FIELDS}
-    values['camera'] = info.camera.to_dict()
+    values = db.info.to_dict()
     values['pose_spacing'] = db.poses.spacing
     connection.executemany('INSERT INTO build_parameters VALUES (?, ?)',
                            [(key, json.dumps(value, sort_keys=True, allow_nan=False))
@@ -222,11 +224,21 @@ def open_database(path: str | Path) -> LandmarkDatabase:
     start = time.perf_counter()
     with _checked_connection(path) as connection:
         try:
+            digest = connection.execute(
+                "SELECT value FROM meta WHERE key = 'content_digest'").fetchone()
+            if digest is None:
+                raise LandmarkDbError("meta 'content_digest' is missing")
+            digest = digest[0]
             db, stored_adjacency = _load(connection)
         except LandmarkDbError as error:
-            raise LandmarkDbError(f'{path}: damaged database: {error}') from None
-        except (sqlite3.Error, ValueError) as error:
-            raise LandmarkDbError(f'{path}: damaged database: {error}') from None
+            raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
+                from None
+        except _DAMAGE as error:
+            raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
+                from None
+    if digest != db.content_digest():
+        raise LandmarkDbError(f'{path}: damaged database: its contents do not match their '
+                              f'checksum (content_digest)')
     if stored_adjacency != db.adjacency:
         raise LandmarkDbError(f'{path}: damaged database: the stored region graph does '
                               f'not match the regions')
@@ -296,8 +308,9 @@ def database_summary(path: str | Path) -> DatabaseSummary:
             build = {key: json.loads(value) for key, value in connection.execute(
                 'SELECT key, value FROM build_parameters ORDER BY key')}
             table_bytes = _table_bytes(connection)
-        except (sqlite3.Error, ValueError) as error:
-            raise LandmarkDbError(f'{path}: damaged database: {error}') from None
+        except _DAMAGE as error:
+            raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
+                from None
     return DatabaseSummary(str(path), Path(path).stat().st_size, SCHEMA_VERSION, counts,
                            table_bytes, build)
 
@@ -394,16 +407,21 @@ def _check_file(connection: sqlite3.Connection, path: str | Path) -> None:
         meta = dict(connection.execute('SELECT key, value FROM meta'))
         if meta.get('application') != APPLICATION_NAME:
             raise LandmarkDbError(f'{path}: not a landmark database (meta application '
-                                  f'{meta.get("application")!r})')
+                                  f'{_shorten(repr(meta.get("application")), 60)})')
         if meta.get('schema_version') != str(version):
             raise LandmarkDbError(
                 f'{path}: damaged database: meta schema_version '
-                f'{meta.get("schema_version")!r} differs from user_version {version}')
-    except sqlite3.DatabaseError as error:
-        raise LandmarkDbError(f'{path}: damaged or not a SQLite database ({error})') from None
+                f'{_shorten(repr(meta.get("schema_version")), 60)} differs from '
+                f'user_version {version}')
+    except _DAMAGE as error:
+        raise LandmarkDbError(
+            f'{path}: damaged or not a SQLite database ({_shorten(str(error))})') from None
 
 
 def _shorten(text: str, limit: int = 160) -> str:
+    """One printable line of at most ``limit`` characters (SQLite may quote raw bytes)."""
+    text = text.split(' with text ', 1)[0]
+    text = ''.join(c if c.isprintable() else '?' for c in ' '.join(text.split()))
     return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
@@ -420,12 +438,9 @@ def _check_ids(ids: np.ndarray, table: str) -> None:
 def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjacency]:
     build = {key: json.loads(value) for key, value in
              connection.execute('SELECT key, value FROM build_parameters')}
-    missing = [name for name in (*_INFO_FIELDS, 'pose_spacing') if name not in build]
-    if missing:
-        raise LandmarkDbError(f'build parameter {missing[0]!r} is missing')
-    info_values = {name: build[name] for name in _INFO_FIELDS}
-    info_values['camera'] = CameraIntrinsics.from_dict(build['camera'])
-    info = BuildInfo(**info_values)
+    if 'pose_spacing' not in build:
+        raise LandmarkDbError("build parameter 'pose_spacing' is missing")
+    info = BuildInfo.from_dict(build)
 
     ints = _array(connection, 'SELECT id, grid_ix, grid_iy FROM poses ORDER BY id',
                   np.int64, 3)
