@@ -308,10 +308,11 @@ def database_summary(path: str | Path) -> DatabaseSummary:
             build = {key: json.loads(value) for key, value in connection.execute(
                 'SELECT key, value FROM build_parameters ORDER BY key')}
             table_bytes = _table_bytes(connection)
+            version = int(connection.execute('PRAGMA user_version').fetchone()[0])
         except _DAMAGE as error:
             raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
                 from None
-    return DatabaseSummary(str(path), Path(path).stat().st_size, SCHEMA_VERSION, counts,
+    return DatabaseSummary(str(path), Path(path).stat().st_size, version, counts,
                            table_bytes, build)
 
 
