@@ -329,3 +329,26 @@ def test_random_damage_gives_a_database_or_one_line(tmp_path, damage):
     else:
         # Only damage to unused bytes passes: the content checksum catches the rest.
         assert db == original
+
+
+def test_everything_is_written_in_one_transaction(tmp_path, monkeypatch):
+    statements = []
+    real_connect = sqlite3.connect
+
+    def traced(*args, **kwargs):
+        connection = real_connect(*args, **kwargs)
+        connection.set_trace_callback(statements.append)
+        return connection
+
+    monkeypatch.setattr(store.sqlite3, 'connect', traced)
+    write_database(tmp_path / 'room.db', sample_database(np.random.default_rng(0)))
+    words = [s.split()[0].upper() for s in statements]
+    assert words.count('BEGIN') == 1 and words.count('COMMIT') == 1
+    begin, commit = words.index('BEGIN'), words.index('COMMIT')
+    # Every table and row is written between BEGIN and COMMIT (serialize() then reads
+    # the page count).
+    writes = [i for i, w in enumerate(words) if w in ('CREATE', 'INSERT', 'UPDATE', 'DELETE')]
+    assert all(begin < i < commit for i in writes)
+    assert all(s.startswith('PRAGMA "main".page_count') for s in statements[commit + 1:])
+    assert words.count('INSERT') > 10
+    assert not any(w in ('SAVEPOINT', 'RELEASE', 'ROLLBACK') for w in words)

@@ -230,10 +230,7 @@ def open_database(path: str | Path) -> LandmarkDatabase:
                 raise LandmarkDbError("meta 'content_digest' is missing")
             digest = digest[0]
             db, stored_adjacency = _load(connection)
-        except LandmarkDbError as error:
-            raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
-                from None
-        except _DAMAGE as error:
+        except (LandmarkDbError, *_DAMAGE) as error:
             raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
                 from None
     if digest != db.content_digest():
