@@ -1,0 +1,531 @@
+"""Correspondence classes of image features: Algorithm 6.3 (Section 6.2.1, Figure 6.3).
+
+Problem. Given the image features seen from every sampled pose, group them into
+classes, one per scene feature, and drop every feature that could be confused with
+another class. With a descriptor distance delta and a threshold tau, the relation
+
+    f =_F g  <=>  delta(f, g) <= tau  and  g = argmin_{phi in F_w} delta(f, phi)   (6.4)
+
+(g seen from pose w) is a nearest-neighbour relation, neither symmetric nor
+transitive. Algorithm 6.3 restricts it to the largest set of features on which it is
+an equivalence:
+
+* it is evaluated only between poses v, w at most ``gamma`` edges apart in the pose
+  graph G (the thesis's relaxation: gamma = 1 tracks features between adjacent poses,
+  a gamma as large as the widest visibility region is exact);
+* a mutual nearest-neighbour pair within tau merges the two features' classes
+  (transitive closure);
+* a nearest neighbour within tau that is not mutual breaks symmetry: the classes of
+  both features are excluded, and stay excluded through later merges;
+* after the closure, a class holding two features of one pose breaks local uniqueness
+  (6.3) and is excluded.
+
+Every feature starts in a class of its own, so a feature that matched nothing is a
+class seen from one pose (the filters of Section 6.2.2 drop such classes).
+
+Implementation. The outcome of Figure 6.3 does not depend on the order in which pose
+pairs and features are visited (merging only grows classes and exclusion is sticky),
+so the loops become array operations: for every unordered pair of poses within gamma
+the squared distances ``|a|^2 + |b|^2 - 2 a.b`` come from one float32 BLAS product
+(the pairs of one pose are stacked into one product), nearest neighbours in both
+directions are two ``argmin`` calls, and the transitive closure is the connected
+components of the graph of mutual matches (:func:`scipy.sparse.csgraph.connected_components`).
+Complexity: O(sum over pairs of n_v n_w d) for the distances, O(N) for the rest.
+
+Departures from the text, with reasons:
+
+* **Pose pairs** are unordered and each is compared once; the nearest neighbours of
+  both directions (v -> w and w -> v) come from the same distance matrix, which is
+  what the algorithm's loop over ordered pairs computes. A pose is not compared with
+  itself (every feature is its own nearest neighbour there: nothing to learn).
+* **Several images per pose** (four pinhole headings, say) are given as one
+  concatenated feature set per pose, as the thesis asks ("integrated into a unique
+  panorama").
+* **Optional ratio test** (``ratio``, Lowe 2004): a nearest neighbour within tau whose
+  distance is not below ``ratio`` times the second-nearest distance in the same image
+  set is ambiguous and is treated like a non-symmetric match (both classes are
+  excluded), in the spirit of the thesis's "discard all the features that are not
+  distinctive enough". Off by default (see
+  ``docs/classes.md`` for the measurements behind the defaults).
+
+Reference: thesis Section 6.2.1, equations (6.3) and (6.4), Figure 6.3.
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+import logging
+import math
+import time
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from visibility_builder.errors import VisibilityBuilderError
+
+__all__ = [
+    'ClassConfig',
+    'ClassResult',
+    'PairMatches',
+    'correspondence_classes',
+    'match_pose_pair',
+    'pose_pairs_within',
+]
+
+logger = logging.getLogger(__name__)
+
+# Most distance-matrix entries per BLAS product (4 MB: small products stay in cache).
+_BLOCK_ENTRIES = 1_000_000
+
+
+@dataclass(frozen=True)
+class ClassConfig:
+    """Parameters of Algorithm 6.3.
+
+    Attributes:
+        tau: largest descriptor distance of a match (Euclidean; OpenCV SIFT
+            descriptors have a norm of about 512).
+        gamma: pose pairs at most this many edges apart in G are compared (>= 1).
+        ratio: Lowe's ratio; a nearest neighbour within ``tau`` that is not closer
+            than ``ratio`` times the second nearest counts as a non-symmetric match.
+            ``None`` disables the test.
+        workers: processes that compute the pose-pair matches (1: in this process).
+    """
+
+    tau: float = 250.0
+    gamma: int = 3
+    ratio: float | None = None
+    workers: int = 1
+    transitivity: bool = False
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.tau, (int, float)) and math.isfinite(self.tau)
+                and self.tau > 0):
+            raise VisibilityBuilderError(f'tau must be a positive number, got {self.tau!r}')
+        if isinstance(self.gamma, bool) or not isinstance(self.gamma, (int, np.integer)) \
+                or self.gamma < 1:
+            raise VisibilityBuilderError(f'gamma must be an integer >= 1, got {self.gamma!r}')
+        if self.ratio is not None and not (isinstance(self.ratio, (int, float))
+                                           and 0 < self.ratio <= 1):
+            raise VisibilityBuilderError(f'ratio must be in (0, 1] or None, got {self.ratio!r}')
+        if isinstance(self.workers, bool) or not isinstance(self.workers, (int, np.integer)) \
+                or self.workers < 1:
+            raise VisibilityBuilderError(f'workers must be an integer >= 1, got {self.workers!r}')
+
+
+@dataclass
+class ClassResult:
+    """Feature classes of Algorithm 6.3.
+
+    Attributes:
+        labels: per pose, ``(n_i,)`` int64 class id of each feature (the rows of that
+            pose's descriptor array), -1 for an excluded feature.
+        n_classes: number of classes kept; ids are ``0 .. n_classes - 1``.
+        visibility: ``(n_poses, n_classes)`` bool CSR; ``visibility[v, c]`` is true when
+            pose v sees a feature of class c (the thesis's F_v).
+        stats: counts of the run (see :func:`correspondence_classes`).
+    """
+
+    labels: list[np.ndarray]
+    n_classes: int
+    visibility: sp.csr_matrix
+    stats: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class PairMatches:
+    """Nearest-neighbour relations between the features of two poses a and b.
+
+    Attributes:
+        mutual: ``(k, 2)`` int64 feature index pairs (in a, in b) that are each
+            other's nearest neighbour within tau: their classes merge.
+        broken_a: ``(p,)`` indices of a's features that are in a non-symmetric
+            nearest-neighbour relation within tau (or fail the ratio test).
+        broken_b: ``(q,)`` the same for b's features.
+        tested: nearest-neighbour queries made (``n_a + n_b``).
+        within_tau: queries whose nearest neighbour lies within tau.
+    """
+
+    mutual: np.ndarray
+    broken_a: np.ndarray
+    broken_b: np.ndarray
+    tested: int
+    within_tau: int
+
+
+def pose_pairs_within(edges: np.ndarray, n_poses: int, gamma: int) -> np.ndarray:
+    """Unordered pose pairs at most ``gamma`` edges apart in the pose graph.
+
+    Args:
+        edges: ``(m, 2)`` int pose index pairs (undirected; self-loops ignored).
+        n_poses: number of poses.
+        gamma: largest graph distance (>= 1).
+
+    Returns:
+        ``(p, 2)`` int64 pairs ``(v, w)`` with ``v < w``, sorted.
+
+    Raises:
+        VisibilityBuilderError: on an edge index outside ``0 .. n_poses - 1``.
+    """
+    edges = _check_edges(edges, n_poses)
+    if n_poses == 0 or len(edges) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    keep = edges[:, 0] != edges[:, 1]
+    rows = np.concatenate([edges[keep, 0], edges[keep, 1]])
+    cols = np.concatenate([edges[keep, 1], edges[keep, 0]])
+    adjacency = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)),
+                              shape=(n_poses, n_poses))
+    adjacency.data[:] = 1
+    # Breadth-first growth of all neighbourhoods at once: reach_{k+1} = reach_k (I + A).
+    step = (adjacency + sp.identity(n_poses, dtype=np.int8, format='csr')).astype(bool)
+    reach = sp.identity(n_poses, dtype=bool, format='csr')
+    for _ in range(int(gamma)):
+        grown = (reach @ step).astype(bool)
+        if grown.nnz == reach.nnz:
+            break
+        reach = grown
+    reach = sp.triu(reach, k=1).tocoo()
+    pairs = np.column_stack([reach.row, reach.col]).astype(np.int64)
+    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
+    return pairs[order]
+
+
+def match_pose_pair(a: np.ndarray, b: np.ndarray, tau: float,
+                    ratio: float | None = None) -> PairMatches:
+    """Evaluate relation (6.4) in both directions between two poses' features.
+
+    Args:
+        a: ``(n_a, d)`` float32 descriptors of pose a.
+        b: ``(n_b, d)`` float32 descriptors of pose b.
+        tau: largest matching distance.
+        ratio: optional Lowe ratio (see :class:`ClassConfig`).
+
+    Returns:
+        The :class:`PairMatches` of the pair.
+    """
+    a = np.ascontiguousarray(a, dtype=np.float32)
+    b = np.ascontiguousarray(b, dtype=np.float32)
+    a_sq = np.einsum('ij,ij->i', a, a)
+    b_sq = np.einsum('ij,ij->i', b, b)
+    d2 = _squared_distances(a, a_sq, b, b_sq)
+    return _relations(d2, float(tau) ** 2, ratio)
+
+
+def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.ndarray,
+                           config: ClassConfig | None = None) -> ClassResult:
+    """Compute feature classes and per-pose visibility with Algorithm 6.3.
+
+    Args:
+        pose_descriptors: per sampled pose, ``(n_i, d)`` float32 descriptors of all
+            features of that pose (all its images concatenated); ``n_i`` may be 0.
+        edges: ``(m, 2)`` int pose graph G (undirected).
+        config: tau, gamma, ratio and workers; defaults of :class:`ClassConfig`.
+
+    Returns:
+        The :class:`ClassResult`. ``stats`` holds: ``poses``, ``features``,
+        ``pose_pairs`` (compared), ``nn_tested`` (nearest-neighbour queries),
+        ``nn_within_tau``, ``mutual`` (mutual matches merged), ``broken_features``
+        (features in a non-symmetric relation), ``classes_before`` (classes after the
+        closure, singletons included), ``excluded_symmetry``,
+        ``excluded_uniqueness`` (classes excluded by each rule; a class breaking both
+        counts under symmetry), ``classes``, ``multi_pose_classes`` (kept classes seen
+        from at least two poses), ``features_kept``, ``seconds``.
+
+    Raises:
+        VisibilityBuilderError: on descriptor arrays of the wrong shape or
+            dimension, non-finite values, or edges outside the pose range.
+
+    Example:
+        >>> a = np.eye(2, 4, dtype=np.float32) * 100
+        >>> result = correspondence_classes([a, a + 1], [[0, 1]], ClassConfig(tau=10))
+        >>> result.n_classes, [lab.tolist() for lab in result.labels]
+        (2, [[0, 1], [0, 1]])
+    """
+    config = config if config is not None else ClassConfig()
+    start = time.perf_counter()
+    descriptors = _check_descriptors(pose_descriptors)
+    n_poses = len(descriptors)
+    counts = np.array([len(d) for d in descriptors], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    n_features = int(offsets[-1])
+    pairs = pose_pairs_within(edges, n_poses, config.gamma)
+    pairs = pairs[(counts[pairs[:, 0]] > 0) & (counts[pairs[:, 1]] > 0)]
+
+    chunks = _chunk_by_first_pose(pairs, config.workers)
+    tau2 = float(config.tau) ** 2
+    if config.workers > 1 and len(chunks) > 1:
+        with ProcessPoolExecutor(max_workers=config.workers, initializer=_init_worker,
+                                 initargs=(descriptors,)) as pool:
+            results = list(pool.map(_match_chunk_in_worker,
+                                    [(chunk, tau2, config.ratio) for chunk in chunks]))
+    else:
+        results = [_match_chunk(descriptors, chunk, tau2, config.ratio) for chunk in chunks]
+
+    mutual = [r[0] for r in results]
+    broken = [r[1] for r in results]
+    merged = np.concatenate(mutual) if mutual else np.zeros((0, 2), dtype=np.int64)
+    broken_ids = np.unique(np.concatenate(broken)) if broken else np.zeros(0, dtype=np.int64)
+    tested = sum(r[2] for r in results)
+    within = sum(r[3] for r in results)
+
+    # Transitive closure: classes are the connected components of the mutual matches.
+    graph = sp.coo_matrix((np.ones(len(merged), dtype=np.int8), (merged[:, 0], merged[:, 1])),
+                          shape=(n_features, n_features))
+    n_components, component = connected_components(graph, directed=False)
+    pose_of = np.repeat(np.arange(n_poses, dtype=np.int64), counts)
+
+    # Symmetry: a class holding a feature of a broken relation is excluded.
+    excluded_sym = np.zeros(n_components, dtype=bool)
+    excluded_sym[component[broken_ids]] = True
+    # Local uniqueness (6.3): a class with two features of one pose is excluded.
+    key = component.astype(np.int64) * max(n_poses, 1) + pose_of
+    key_sorted = np.sort(key)
+    repeated = key_sorted[1:][key_sorted[1:] == key_sorted[:-1]] // max(n_poses, 1)
+    excluded_unique = np.zeros(n_components, dtype=bool)
+    excluded_unique[repeated] = True
+    excluded_unique &= ~excluded_sym
+    # Transitivity within gamma: every two features of a class seen from poses at most
+    # gamma apart must be a mutual match themselves (the closure may chain f ~ g ~ h
+    # while f and h, compared directly, are not related).
+    excluded_trans = np.zeros(n_components, dtype=bool)
+    if config.transitivity and len(pairs):
+        excluded_trans = _breaks_transitivity(component, pose_of, merged, pairs,
+                                              n_components, n_poses)
+        excluded_trans &= ~(excluded_sym | excluded_unique)
+    keep = ~(excluded_sym | excluded_unique | excluded_trans)
+
+    new_id = np.full(n_components, -1, dtype=np.int64)
+    n_classes = int(keep.sum())
+    new_id[keep] = np.arange(n_classes)
+    flat_labels = new_id[component]
+    kept = flat_labels >= 0
+    visibility = sp.csr_matrix(
+        (np.ones(int(kept.sum()), dtype=bool), (pose_of[kept], flat_labels[kept])),
+        shape=(n_poses, n_classes))
+    visibility.sort_indices()
+    labels = [flat_labels[offsets[i]:offsets[i + 1]].copy() for i in range(n_poses)]
+    poses_per_class = np.bincount(flat_labels[kept], minlength=n_classes)
+    seconds = time.perf_counter() - start
+    stats: dict[str, float] = {
+        'poses': n_poses,
+        'features': n_features,
+        'pose_pairs': len(pairs),
+        'nn_tested': int(tested),
+        'nn_within_tau': int(within),
+        'mutual': len(merged),
+        'broken_features': len(broken_ids),
+        'classes_before': int(n_components),
+        'excluded_symmetry': int(excluded_sym.sum()),
+        'excluded_uniqueness': int(excluded_unique.sum()),
+        'excluded_transitivity': int(excluded_trans.sum()),
+        'classes': n_classes,
+        'multi_pose_classes': int(np.sum(poses_per_class >= 2)),
+        'features_kept': int(kept.sum()),
+        'seconds': round(seconds, 3),
+    }
+    logger.info('correspondence classes (tau=%g, gamma=%d, ratio=%s): %s', config.tau,
+                config.gamma, config.ratio, stats)
+    return ClassResult(labels, n_classes, visibility, stats)
+
+
+def _breaks_transitivity(component: np.ndarray, pose_of: np.ndarray, merged: np.ndarray,
+                         pairs: np.ndarray, n_components: int, n_poses: int) -> np.ndarray:
+    """Components whose members at poses within gamma are not all mutual matches.
+
+    With at most one feature per pose (local uniqueness) a component seen from the pose
+    set S is transitive within gamma exactly when its mutual matches number as many as
+    the pairs of S within gamma; each such pair holds at most one mutual match.
+    """
+    incidence = sp.csr_matrix(
+        (np.ones(len(component), dtype=np.float32), (component, pose_of)),
+        shape=(n_components, n_poses))
+    incidence.data[:] = 1.0   # duplicates summed above: back to 0/1
+    reach = sp.csr_matrix(
+        (np.ones(2 * len(pairs), dtype=np.float32),
+         (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]])),
+        shape=(n_poses, n_poses))
+    near_pairs = np.asarray((incidence @ reach).multiply(incidence).sum(axis=1)).ravel() / 2
+    matched = np.bincount(component[merged[:, 0]], minlength=n_components)
+    return matched < np.rint(near_pairs)
+
+
+# -- matching kernels ------------------------------------------------------------------
+
+def _squared_distances(a: np.ndarray, a_sq: np.ndarray, b: np.ndarray,
+                       b_sq: np.ndarray) -> np.ndarray:
+    """``(n_a, n_b)`` float32 squared distances by one BLAS product."""
+    d2 = a @ b.T
+    d2 *= -2.0
+    d2 += a_sq[:, None]
+    d2 += b_sq[None, :]
+    return d2
+
+
+def _relations(d2: np.ndarray, tau2: float, ratio: float | None) -> PairMatches:
+    """Relation (6.4) both ways from the squared distances of one pose pair."""
+    n_a, n_b = d2.shape
+    rows = np.arange(n_a)
+    cols = np.arange(n_b)
+    fwd = d2.argmin(axis=1)   # nearest neighbour in b of each feature of a
+    bwd = d2.argmin(axis=0)   # nearest neighbour in a of each feature of b
+    fwd_d2 = d2[rows, fwd]
+    bwd_d2 = d2[bwd, cols]
+    near_a = fwd_d2 <= tau2
+    near_b = bwd_d2 <= tau2
+    mutual_a = bwd[fwd] == rows
+    mutual_b = fwd[bwd] == cols
+    ok_a = near_a & mutual_a
+    ok_b = near_b & mutual_b
+    if ratio is not None:
+        ok_a &= _passes_ratio(d2, fwd_d2, near_a, ratio, axis=1)
+        ok_b &= _passes_ratio(d2, bwd_d2, near_b, ratio, axis=0)
+    # A mutual pair within tau is found from both sides; it merges only when both
+    # sides accept it (always, without the ratio test).
+    merge_a = ok_a & ok_b[fwd]
+    merge_b = ok_b & ok_a[bwd]
+    i = np.flatnonzero(merge_a)
+    mutual = np.column_stack([i, fwd[i]]).astype(np.int64)
+    # Every other nearest neighbour within tau breaks the relation for both ends.
+    bad_a = np.flatnonzero(near_a & ~merge_a)
+    bad_b = np.flatnonzero(near_b & ~merge_b)
+    broken_a = np.unique(np.concatenate([bad_a, bwd[bad_b]])).astype(np.int64)
+    broken_b = np.unique(np.concatenate([bad_b, fwd[bad_a]])).astype(np.int64)
+    return PairMatches(mutual, broken_a, broken_b, int(n_a + n_b),
+                       int(near_a.sum() + near_b.sum()))
+
+
+def _passes_ratio(d2: np.ndarray, best_d2: np.ndarray, near: np.ndarray, ratio: float,
+                  axis: int) -> np.ndarray:
+    """Lowe's test ``d1 < ratio * d2`` for the queries that are ``near``."""
+    passes = np.ones(best_d2.shape, dtype=bool)
+    idx = np.flatnonzero(near)
+    if idx.size == 0 or d2.shape[axis] < 2:
+        return passes
+    sub = d2[idx, :] if axis == 1 else d2[:, idx].T
+    second = np.partition(sub, 1, axis=1)[:, 1]
+    passes[idx] = best_d2[idx] < (ratio * ratio) * np.maximum(second, 0.0)
+    return passes
+
+
+def _chunk_by_first_pose(pairs: np.ndarray, workers: int) -> list[np.ndarray]:
+    """Split the pairs into runs sharing the first pose, grouped into work chunks."""
+    if len(pairs) == 0:
+        return []
+    starts = np.flatnonzero(np.r_[True, pairs[1:, 0] != pairs[:-1, 0]])
+    runs = np.split(pairs, starts[1:])
+    n_chunks = max(1, min(len(runs), 4 * workers if workers > 1 else 1))
+    bounds = np.linspace(0, len(runs), n_chunks + 1).round().astype(int)
+    return [np.concatenate(runs[s:e]) for s, e in zip(bounds[:-1], bounds[1:]) if e > s]
+
+
+def _match_chunk(descriptors: list[np.ndarray], pairs: np.ndarray, tau2: float,
+                 ratio: float | None) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Match every pose pair of a chunk; return global feature ids.
+
+    Returns:
+        ``(mutual (k, 2), broken (p,), tested, within_tau)`` with feature ids global
+        over all poses (pose offsets added).
+    """
+    counts = np.array([len(d) for d in descriptors], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    norms: dict[int, np.ndarray] = {}
+
+    def sq(v: int) -> np.ndarray:
+        if v not in norms:
+            norms[v] = np.einsum('ij,ij->i', descriptors[v], descriptors[v])
+        return norms[v]
+
+    mutual: list[np.ndarray] = []
+    broken: list[np.ndarray] = []
+    tested = within = 0
+    starts = np.flatnonzero(np.r_[True, pairs[1:, 0] != pairs[:-1, 0]])
+    for run in np.split(pairs, starts[1:]):
+        v = int(run[0, 0])
+        a = descriptors[v]
+        partners = run[:, 1]
+        # Stack the partners of v into products of at most _BLOCK_ENTRIES entries.
+        sizes = counts[partners]
+        budget = max(1, _BLOCK_ENTRIES // max(len(a), 1))
+        group: list[int] = []
+        total = 0
+        groups: list[list[int]] = []
+        for w, size in zip(partners.tolist(), sizes.tolist()):
+            if group and total + size > budget:
+                groups.append(group)
+                group, total = [], 0
+            group.append(w)
+            total += size
+        if group:
+            groups.append(group)
+        for group in groups:
+            b = np.concatenate([descriptors[w] for w in group]) if len(group) > 1 \
+                else descriptors[group[0]]
+            b_sq = np.concatenate([sq(w) for w in group])
+            d2 = _squared_distances(a, sq(v), b, b_sq)
+            col = 0
+            for w in group:
+                n_w = int(counts[w])
+                rel = _relations(d2[:, col:col + n_w], tau2, ratio)
+                col += n_w
+                mutual.append(rel.mutual + np.array([offsets[v], offsets[w]]))
+                broken.append(rel.broken_a + offsets[v])
+                broken.append(rel.broken_b + offsets[w])
+                tested += rel.tested
+                within += rel.within_tau
+    empty = np.zeros(0, dtype=np.int64)
+    return (np.concatenate(mutual) if mutual else np.zeros((0, 2), dtype=np.int64),
+            np.concatenate(broken) if broken else empty, tested, within)
+
+
+_WORKER_DESCRIPTORS: list[np.ndarray] = []
+
+
+def _init_worker(descriptors: list[np.ndarray]) -> None:
+    global _WORKER_DESCRIPTORS
+    _WORKER_DESCRIPTORS = descriptors
+
+
+def _match_chunk_in_worker(
+        args: tuple[np.ndarray, float, float | None]) -> tuple[np.ndarray, np.ndarray, int, int]:
+    pairs, tau2, ratio = args
+    return _match_chunk(_WORKER_DESCRIPTORS, pairs, tau2, ratio)
+
+
+# -- input checks ----------------------------------------------------------------------
+
+def _check_descriptors(pose_descriptors: Sequence[np.ndarray]) -> list[np.ndarray]:
+    out: list[np.ndarray] = []
+    dim: int | None = None
+    for i, d in enumerate(pose_descriptors):
+        arr = np.asarray(d)
+        if arr.ndim != 2:
+            raise VisibilityBuilderError(
+                f'descriptors of pose {i} must be a 2-D (n, d) array, got shape {arr.shape}')
+        if arr.shape[0] > 0:
+            if dim is None:
+                dim = arr.shape[1]
+            elif arr.shape[1] != dim:
+                raise VisibilityBuilderError(
+                    f'descriptors of pose {i} have dimension {arr.shape[1]}, expected {dim}')
+        arr = np.ascontiguousarray(arr, dtype=np.float32)
+        if not np.isfinite(arr).all():
+            raise VisibilityBuilderError(f'descriptors of pose {i} contain NaN or inf')
+        out.append(arr)
+    return out
+
+
+def _check_edges(edges: np.ndarray, n_poses: int) -> np.ndarray:
+    arr = np.asarray(edges)
+    if arr.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise VisibilityBuilderError(f'edges must be an (m, 2) array, got shape {arr.shape}')
+    if not np.issubdtype(arr.dtype, np.integer):
+        raise VisibilityBuilderError(f'edges must be integer pose indices, got {arr.dtype}')
+    if arr.min() < 0 or arr.max() >= n_poses:
+        bad = int(arr.max() if arr.max() >= n_poses else arr.min())
+        raise VisibilityBuilderError(
+            f'edge pose index {bad} is outside 0 .. {n_poses - 1}')
+    return arr.astype(np.int64)

@@ -1,0 +1,190 @@
+"""Algorithm 6.3 (visibility_builder.classes): one hand-built case per rule of Figure 6.3."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from visibility_builder.classes import (
+    ClassConfig,
+    correspondence_classes,
+    match_pose_pair,
+    pose_pairs_within,
+)
+from visibility_builder.errors import VisibilityBuilderError
+
+DIM = 8
+
+
+def feats(*values: float, axis: int = 0) -> np.ndarray:
+    """Features on one line of descriptor space: value * e_axis, plus an offset."""
+    out = np.zeros((len(values), DIM), np.float32)
+    out[:, axis] = values
+    out[:, DIM - 1] = 1000.0   # far from the origin, like real SIFT vectors
+    return out
+
+
+def path(n: int) -> np.ndarray:
+    return np.array([(i, i + 1) for i in range(n - 1)])
+
+
+def test_mutual_matches_merge_into_classes():
+    a = np.vstack([feats(0.0), feats(0.0, axis=1) + 500])
+    b = a + 1.0
+    result = correspondence_classes([a, b], path(2), ClassConfig(tau=10, gamma=1))
+    assert result.n_classes == 2
+    assert result.labels[0].tolist() == result.labels[1].tolist()
+    assert sorted(result.labels[0].tolist()) == [0, 1]
+    assert result.visibility.toarray().tolist() == [[True, True], [True, True]]
+    assert result.stats['mutual'] == 2
+    assert result.stats['excluded_symmetry'] == 0
+
+
+def test_non_symmetric_match_within_tau_excludes_both_classes():
+    # f0 -> g (8 <= tau) but g's nearest neighbour in pose 0 is f1 (2): broken symmetry.
+    pose0 = np.vstack([feats(0.0, 10.0), feats(0.0, axis=2) + 300])
+    pose1 = np.vstack([feats(8.0), feats(1.0, axis=2) + 300])
+    result = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=9, gamma=1))
+    assert result.labels[0].tolist()[:2] == [-1, -1]   # f0 and f1 (f1 ~ g, excluded)
+    assert result.labels[1].tolist()[0] == -1           # g
+    assert result.n_classes == 1                        # the unrelated pair survives
+    assert result.labels[0][2] == result.labels[1][1] == 0
+    assert result.stats['excluded_symmetry'] >= 2
+
+
+def test_non_symmetric_neighbour_beyond_tau_is_ignored():
+    pose0 = feats(0.0, 10.0)
+    pose1 = feats(8.0)
+    result = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=7, gamma=1))
+    # f0 -> g is 8 > tau: no relation; f1 <-> g merge.
+    assert result.n_classes == 2
+    assert result.labels[0][1] == result.labels[1][0]
+    assert result.labels[0][0] != result.labels[0][1]
+    assert result.stats['excluded_symmetry'] == 0
+
+
+def test_two_features_of_one_pose_in_one_class_are_excluded():
+    # Square A-B-C-D-A, gamma 1: p ~ r ~ s ~ t ~ q chains p and q, both seen from A.
+    a = feats(0.0, 16.0)
+    b, c, d = feats(4.0), feats(8.0), feats(12.0)
+    square = np.array([(0, 1), (1, 2), (2, 3), (3, 0)])
+    result = correspondence_classes([a, b, c, d], square, ClassConfig(tau=5, gamma=1))
+    assert result.n_classes == 0
+    assert all((lab == -1).all() for lab in result.labels)
+    assert result.stats['excluded_uniqueness'] == 1
+    assert result.stats['excluded_symmetry'] == 0
+    assert result.stats['mutual'] == 4
+
+
+def test_gamma_limits_which_pose_pairs_are_compared():
+    poses = [feats(0.0), feats(0.0, axis=3) + 400, feats(1.0)]
+    near = correspondence_classes(poses, path(3), ClassConfig(tau=5, gamma=1))
+    far = correspondence_classes(poses, path(3), ClassConfig(tau=5, gamma=2))
+    assert near.stats['pose_pairs'] == 2 and far.stats['pose_pairs'] == 3
+    assert near.n_classes == 3          # poses 0 and 2 never compared
+    assert far.n_classes == 2
+    assert far.labels[0][0] == far.labels[2][0]
+    assert far.visibility[:, far.labels[0][0]].toarray().ravel().tolist() == [True, False, True]
+
+
+def test_transitivity_over_a_chain_of_adjacent_poses():
+    # Appearance drifts along a corridor: only neighbours are within tau.
+    poses = [feats(4.0 * i) for i in range(5)]
+    result = correspondence_classes(poses, path(5), ClassConfig(tau=5, gamma=1))
+    assert result.n_classes == 1
+    assert [lab.tolist() for lab in result.labels] == [[0]] * 5
+    assert result.visibility.sum() == 5
+
+
+def test_strict_transitivity_rejects_a_chain_whose_ends_do_not_match():
+    poses = [feats(4.0 * i) for i in range(5)]
+    loose = correspondence_classes(poses, path(5), ClassConfig(tau=5, gamma=2))
+    strict = correspondence_classes(poses, path(5),
+                                    ClassConfig(tau=5, gamma=2, transitivity=True))
+    assert loose.n_classes == 1           # 0~4~8~12~16; poses 2 apart are 8 > tau
+    assert strict.n_classes == 0
+    assert strict.stats['excluded_transitivity'] == 1
+    close = [feats(1.0 * i) for i in range(5)]   # every pair within gamma matches
+    assert correspondence_classes(close, path(5), ClassConfig(
+        tau=5, gamma=2, transitivity=True)).n_classes == 1
+
+
+def test_ratio_test_rejects_ambiguous_nearest_neighbours():
+    # Pose 1 holds a near-copy of f just beyond tau (5.5): Figure 6.3 alone merges f
+    # with its nearest neighbour (3), the ratio test (3 >= 0.5 * 5.5) rejects it.
+    pose0 = feats(0.0)
+    pose1 = np.vstack([feats(3.0), feats(0.0) + np.eye(1, DIM, 1, dtype=np.float32) * 5.5])
+    plain = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=5, gamma=1))
+    ratio = correspondence_classes([pose0, pose1], path(2),
+                                   ClassConfig(tau=5, gamma=1, ratio=0.5))
+    assert plain.labels[0][0] == plain.labels[1][0] >= 0
+    assert ratio.labels[0][0] == -1 and ratio.labels[1][0] == -1
+
+
+def test_match_pose_pair_reports_both_directions():
+    a = feats(0.0, 10.0)
+    b = feats(8.0)
+    rel = match_pose_pair(a, b, tau=9)
+    assert rel.mutual.tolist() == [[1, 0]]
+    # f0 -> g is not mutual: f0 and g are broken (f1 is excluded later, with g's class).
+    assert rel.broken_a.tolist() == [0] and rel.broken_b.tolist() == [0]
+    assert rel.tested == 3 and rel.within_tau == 3
+
+
+def test_pose_pairs_within_gamma_on_a_grid():
+    # 3 x 3 grid, 4-connected: from the centre everything is within 2.
+    idx = np.arange(9).reshape(3, 3)
+    edges = np.vstack([np.c_[idx[:, :-1].ravel(), idx[:, 1:].ravel()],
+                       np.c_[idx[:-1].ravel(), idx[1:].ravel()]])
+    assert len(pose_pairs_within(edges, 9, 1)) == 12
+    two = pose_pairs_within(edges, 9, 2)
+    assert (two[:, 0] < two[:, 1]).all()
+    # pairs at distance 2: 6 straight (same row or column) + 8 diagonal neighbours
+    assert len(two) == 12 + 6 + 8
+    assert len(pose_pairs_within(edges, 9, 4)) == 36
+
+
+def test_invariants_on_random_worlds_and_workers_agree():
+    rng = np.random.default_rng(3)
+    scene = rng.normal(0, 60, (80, 32)).astype(np.float32) + 200
+    poses = []
+    for _ in range(12):
+        seen = rng.choice(80, 30, replace=False)
+        poses.append(scene[seen] + rng.normal(0, 8, (30, 32)).astype(np.float32))
+    edges = np.array([(i, (i + 1) % 12) for i in range(12)])
+    config = ClassConfig(tau=60, gamma=2)
+    one = correspondence_classes(poses, edges, config)
+    two = correspondence_classes(poses, edges, ClassConfig(tau=60, gamma=2, workers=2))
+    assert [a.tolist() for a in one.labels] == [b.tolist() for b in two.labels]
+    assert one.n_classes > 10
+    ids = np.concatenate(one.labels)
+    assert set(ids[ids >= 0].tolist()) == set(range(one.n_classes))
+    for v, lab in enumerate(one.labels):
+        kept = lab[lab >= 0]
+        assert len(np.unique(kept)) == len(kept)          # local uniqueness
+        assert sorted(kept.tolist()) == one.visibility[v].indices.tolist()
+
+
+def test_empty_poses_and_no_edges():
+    empty = np.zeros((0, DIM), np.float32)
+    result = correspondence_classes([empty, feats(1.0)], np.zeros((0, 2), int),
+                                    ClassConfig(tau=5))
+    assert result.n_classes == 1 and result.labels[0].shape == (0,)
+    assert result.visibility.shape == (2, 1)
+
+
+@pytest.mark.parametrize('kwargs, message', [
+    ({'tau': 0}, 'tau'), ({'gamma': 0}, 'gamma'), ({'ratio': 1.5}, 'ratio'),
+    ({'workers': 0}, 'workers'),
+])
+def test_bad_config_is_one_clear_error(kwargs, message):
+    with pytest.raises(VisibilityBuilderError, match=message):
+        ClassConfig(**kwargs)
+
+
+def test_bad_inputs_are_clear_errors():
+    with pytest.raises(VisibilityBuilderError, match='dimension'):
+        correspondence_classes([feats(1.0), np.zeros((2, 4), np.float32)], path(2))
+    with pytest.raises(VisibilityBuilderError, match='outside'):
+        correspondence_classes([feats(1.0), feats(2.0)], np.array([[0, 5]]))
+    with pytest.raises(VisibilityBuilderError, match='NaN'):
+        correspondence_classes([np.full((1, DIM), np.nan, np.float32)], np.zeros((0, 2), int))
