@@ -1,9 +1,12 @@
-"""Shared geometry: camera models and frames (thesis Section 7.5; REP 103 and REP 105).
+"""Shared geometry: camera models, frames, pose solvers (thesis 7.2-7.5; REP 103, REP 105).
 
 Core modules (no rclpy, no message types) used by the renderer, the builder, image
 pose estimation and the localizer: :mod:`.camera` (the panoramic and pinhole camera
-models, their ``CameraInfo`` convention, pixel <-> ray and bearing conversions) and
-:mod:`.frames` (frame names, planar poses, yaw <-> quaternion, the optical frame).
+models, their ``CameraInfo`` convention, pixel <-> ray and bearing conversions),
+:mod:`.frames` (frame names, planar poses, yaw <-> quaternion, the optical frame),
+:mod:`.two_view` (relative motion from a model view to the current view, the four
+methods of Chapter 7) and :mod:`.localize` (the current pose from two or more model
+views of known pose).
 The 2-D segment helpers of the scene live one package lower, in
 :mod:`landmark_db.geometry2d`.
 """
@@ -34,6 +37,20 @@ from visibility_builder.geometry.frames import (
     wrap_angle,
     yaw_quaternion,
 )
+from visibility_builder.geometry.localize import (
+    PoseEstimate,
+    position_from_two_views,
+    position_from_views,
+)
+from visibility_builder.geometry.two_view import (
+    RelativeMotion,
+    TwoViewConfig,
+    general_essential,
+    linear_combination_of_views,
+    panoramic_planar_motion,
+    pinhole_planar_essential,
+    relative_motion,
+)
 
 __all__ = [
     'BASE_FRAME',
@@ -47,12 +64,22 @@ __all__ = [
     'CameraModel',
     'PanoramicCamera',
     'PinholeCamera',
+    'PoseEstimate',
+    'RelativeMotion',
+    'TwoViewConfig',
     'camera_from_info',
     'camera_points_to_world',
     'compose_poses',
+    'general_essential',
     'invert_pose',
+    'linear_combination_of_views',
     'make_camera',
+    'panoramic_planar_motion',
+    'pinhole_planar_essential',
+    'position_from_two_views',
+    'position_from_views',
     'quaternion_yaw',
+    'relative_motion',
     'transform_points',
     'world_points_to_camera',
     'wrap_angle',
