@@ -29,7 +29,6 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 import io
-import logging
 from pathlib import Path
 import struct
 import sys
@@ -61,8 +60,6 @@ __all__ = [
     'summary_channels',
     'top_level_channels',
 ]
-
-_LOG = logging.getLogger(__name__)
 
 #: The eight bytes every MCAP file starts (and ends) with.
 MCAP_MAGIC = b'\x89MCAP0\r\n'
