@@ -305,6 +305,32 @@ def _ransac_needed(inlier_ratio: float, size: int, confidence: float) -> float:
     return math.log(1.0 - confidence) / math.log(1.0 - good)
 
 
+def _msac(E: np.ndarray, f1: np.ndarray, f2: np.ndarray,
+          threshold: float) -> tuple[float, np.ndarray]:
+    err = _sampson(E, f1, f2)
+    return float(np.sum(np.minimum(err * err, threshold * threshold))), np.abs(err) < threshold
+
+
+def _optimise_locally(E: np.ndarray, score: float, f1: np.ndarray, f2: np.ndarray,
+                      threshold: float, fit, minimum: int) -> tuple[np.ndarray, float]:
+    """LO-RANSAC: refit a new best hypothesis on its inliers while the score drops.
+
+    A minimal sample's model is noisy and, with a short baseline, finds few of the
+    inliers at the final threshold; least squares on the points within a wider
+    threshold, shrinking to the final one, recovers them (iterative local
+    optimisation, Chum, Matas and Kittler 2003).
+    """
+    for factor in (4.0, 3.0, 2.0, 1.5, 1.0, 1.0):
+        inliers = np.abs(_sampson(E, f1, f2)) < factor * threshold
+        if inliers.sum() < minimum:
+            continue
+        candidate = fit(f1[inliers], f2[inliers])
+        new_score, _ = _msac(candidate, f1, f2, threshold)
+        if new_score < score:
+            E, score = candidate, new_score
+    return E, score
+
+
 def _refine_planar(theta: float, phi: float, f_model: np.ndarray, f_current: np.ndarray,
                    iterations: int = 6) -> tuple[float, float]:
     """Gauss-Newton on the Sampson errors over ``(theta, phi)`` (numerical Jacobian)."""
@@ -542,6 +568,10 @@ def panoramic_planar_motion(rays_model: np.ndarray, rays_current: np.ndarray, *,
     good = np.isfinite(rotations) & (np.abs(t_pair) > 0)
     rotations, t_pair, pair_j = rotations[good], t_pair[good], pair_j[good]
     if not len(rotations):
+        # All quadratics vanish: typically no translation at all; say so if it is that.
+        turn = float(np.angle(np.sum(v[idx] * (-w[idx]).conj())))      # a1 - a2
+        _check_translation(_planar_to_optical(turn, 0.0)[0], f1[idx], f2[idx], min_parallax,
+                           method)
         raise VisibilityBuilderError(f'{method}: no pair of correspondences fixes the '
                                      f'rotation (eq. 7.19 holds for all)')
     thetas = np.angle(rotations)
@@ -605,6 +635,12 @@ def _planar_e_matrix(e: np.ndarray) -> np.ndarray:
     E[..., 0, 1], E[..., 1, 0], E[..., 1, 2], E[..., 2, 1] = (e[..., 0], e[..., 1],
                                                               e[..., 2], e[..., 3])
     return E
+
+
+def _planar_fit(f1: np.ndarray, f2: np.ndarray) -> np.ndarray:
+    """Least-squares planar essential matrix: the smallest right singular vector."""
+    _, _, vt = np.linalg.svd(_planar_rows(f1, f2))
+    return _planar_e_matrix(vt[-1])
 
 
 def _planar_e_motion(e: np.ndarray, f1: np.ndarray,
@@ -672,7 +708,7 @@ def pinhole_planar_essential(rays_model: np.ndarray, rays_current: np.ndarray, *
     n = len(f1)
     rows = _planar_rows(f1, f2)                                        # (n, 4)
     rng = np.random.default_rng(rng)
-    best_score, best_e = math.inf, None
+    best_score, best_E = math.inf, None
     needed, drawn = float(max_iterations), 0
     while drawn < min(needed, max_iterations):
         count = min(_RANSAC_BATCH, max_iterations - drawn)
@@ -683,20 +719,16 @@ def pinhole_planar_essential(rays_model: np.ndarray, rays_current: np.ndarray, *
         scores = np.sum(np.minimum(err * err, threshold * threshold), axis=1)
         i = int(np.argmin(scores))
         if scores[i] < best_score:
-            best_score, best_e = scores[i], es[i]
-            ratio = float(np.mean(np.abs(err[i]) < threshold))
+            E, score = _optimise_locally(_planar_e_matrix(es[i]), float(scores[i]), f1, f2,
+                                         threshold, _planar_fit, 4)
+            best_score, best_E = score, E
+            ratio = float(np.mean(_msac(E, f1, f2, threshold)[1]))
             needed = _ransac_needed(ratio, 4, confidence)
         drawn += len(samples)
         if n == 4:
             break
-    inliers = np.abs(_sampson(_planar_e_matrix(best_e), f1, f2)) < threshold
-    for _ in range(2):
-        if inliers.sum() < 4:
-            raise VisibilityBuilderError(f'{method}: no consensus: {int(inliers.sum())} '
-                                         f'inliers of {n} correspondences (needs 4)')
-        _, _, vt = np.linalg.svd(rows[inliers])
-        e = vt[-1]
-        inliers = np.abs(_sampson(_planar_e_matrix(e), f1, f2)) < threshold
+    inliers = _msac(best_E, f1, f2, threshold)[1]
+    e = np.array([best_E[0, 1], best_E[1, 0], best_E[1, 2], best_E[2, 1]])
     if inliers.sum() < 4:
         raise VisibilityBuilderError(f'{method}: no consensus: {int(inliers.sum())} inliers '
                                      f'of {n} correspondences (needs 4)')
@@ -817,20 +849,16 @@ def general_essential(rays_model: np.ndarray, rays_current: np.ndarray, *,
         scores = np.sum(np.minimum(err * err, threshold * threshold), axis=1)
         i = int(np.argmin(scores))
         if scores[i] < best_score:
-            best_score, best_E = scores[i], Es[i]
-            ratio = float(np.mean(np.abs(err[i]) < threshold))
+            E, score = _optimise_locally(Es[i], float(scores[i]), f1, f2, threshold,
+                                         _eight_point, 8)
+            best_score, best_E = score, E
+            ratio = float(np.mean(_msac(E, f1, f2, threshold)[1]))
             needed = _ransac_needed(ratio, 8, confidence)
         drawn += len(samples)
         if n == 8:
             break
-    inliers = np.abs(_sampson(best_E, f1, f2)) < threshold
     E = best_E
-    for _ in range(2):
-        if inliers.sum() < 8:
-            raise VisibilityBuilderError(f'{method}: no consensus: {int(inliers.sum())} '
-                                         f'inliers of {n} correspondences (needs 8)')
-        E = _eight_point(f1[inliers], f2[inliers])
-        inliers = np.abs(_sampson(E, f1, f2)) < threshold
+    inliers = _msac(E, f1, f2, threshold)[1]
     if inliers.sum() < 8:
         raise VisibilityBuilderError(f'{method}: no consensus: {int(inliers.sum())} inliers '
                                      f'of {n} correspondences (needs 8)')
@@ -850,6 +878,35 @@ def _centring_pan(f: np.ndarray) -> np.ndarray:
     alpha = -math.atan2(mean[0], mean[2])
     c, s = math.cos(alpha), math.sin(alpha)
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+@dataclass(frozen=True)
+class _LcvFrame:
+    pans: tuple[np.ndarray, np.ndarray, np.ndarray]   # rotations applied to views a, b, c
+    rotation_ab: np.ndarray                            # optical a -> b between panned views
+    m: tuple[np.ndarray, np.ndarray, np.ndarray]       # (n, 2) normalised image points
+    design: np.ndarray                                 # (n, 4) columns x1, y1, x2, 1
+
+
+def _lcv_frame(rays: tuple[np.ndarray, np.ndarray, np.ndarray], mask: np.ndarray,
+               rotation_ab: np.ndarray, min_view_angle: float, method: str) -> _LcvFrame:
+    """Pan the three views to centre the masked points; image points and the basis."""
+    pans = tuple(_centring_pan(f[mask]) for f in rays)
+    panned = [f @ V.T for f, V in zip(rays, pans)]
+    if any(np.any(f[mask, 2] <= 0) for f in panned):
+        raise VisibilityBuilderError(f'{method}: the points span more than 180 degrees')
+    R_b = pans[1] @ rotation_ab @ pans[0].T
+    turn = math.asin(min(abs(R_b[0, 2]), 1.0))
+    if turn < min_view_angle:
+        raise VisibilityBuilderError(
+            f'{method}: the model views see the points from directions only '
+            f'{math.degrees(turn):.2f} deg apart (< {math.degrees(min_view_angle):.1f} '
+            f'deg): x_b is nearly a multiple of x_a, the depth is not observable')
+    with np.errstate(divide='ignore', invalid='ignore'):
+        # Points behind a panned view (outliers only) get far-away coordinates.
+        m = tuple(np.where(f[:, 2:3] > 0, f[:, :2] / f[:, 2:3], 1e6) for f in panned)
+    design = np.column_stack([m[0][:, 0], m[0][:, 1], m[1][:, 0], np.ones(len(m[0]))])
+    return _LcvFrame(pans=pans, rotation_ab=R_b, m=m, design=design)
 
 
 def _lcv_fit(design: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -933,20 +990,11 @@ def linear_combination_of_views(rays_model_a: np.ndarray, rays_model_b: np.ndarr
     n = len(fa)
     # Pan each view virtually (a known rotation about the vertical) to centre its
     # points: weak perspective holds near the optical axis, not 20 degrees off it.
-    Va, Vb, Vc = (_centring_pan(f) for f in (fa, fb, fc))
-    fa, fb, fc = fa @ Va.T, fb @ Vb.T, fc @ Vc.T
-    if np.any(fa[:, 2] <= 0) or np.any(fb[:, 2] <= 0) or np.any(fc[:, 2] <= 0):
-        raise VisibilityBuilderError(f'{method}: the points span more than 180 degrees')
-    R_b, _ = _planar_to_optical(yaw_ab, 0.0)                  # optical rotation a -> b
-    R_b = Vb @ R_b @ Va.T                                      # between the panned views
-    turn = math.asin(min(abs(R_b[0, 2]), 1.0))
-    if turn < min_view_angle:
-        raise VisibilityBuilderError(
-            f'{method}: the model views see the points from directions only '
-            f'{math.degrees(turn):.2f} deg apart (< {math.degrees(min_view_angle):.1f} '
-            f'deg): x_b is nearly a multiple of x_a, the depth is not observable')
-    ma, mb, mc = (f[:, :2] / f[:, 2:3] for f in (fa, fb, fc))
-    design = np.column_stack([ma[:, 0], ma[:, 1], mb[:, 0], np.ones(n)])    # x1, y1, x2, 1
+    # The pans follow the inliers once they are known.
+    rays = (fa, fb, fc)
+    R_ab, _ = _planar_to_optical(yaw_ab, 0.0)                 # optical rotation a -> b
+    frame = _lcv_frame(rays, np.ones(n, dtype=bool), R_ab, min_view_angle, method)
+    mc, design = frame.m[2], frame.design
     rng = np.random.default_rng(rng)
     best_score, best_in = math.inf, np.ones(n, dtype=bool)
     if n > 4:
@@ -968,15 +1016,19 @@ def linear_combination_of_views(rays_model_a: np.ndarray, rays_model_b: np.ndarr
                 needed = _ransac_needed(float(best_in.mean()), 4, confidence)
             drawn += count
     inliers = best_in
-    for _ in range(2):
+    for _ in range(3):
         if inliers.sum() < 4:
             raise VisibilityBuilderError(f'{method}: no consensus: {int(inliers.sum())} '
                                          f'inliers of {n} correspondences (needs 4)')
-        coef = _lcv_fit(design[inliers], mc[inliers])                         # (4, 2)
-        inliers = np.linalg.norm(design @ coef - mc, axis=1) < threshold
+        frame = _lcv_frame(rays, inliers, R_ab, min_view_angle, method)
+        coef = _lcv_fit(frame.design[inliers], frame.m[2][inliers])          # (4, 2)
+        inliers = np.linalg.norm(frame.design @ coef - frame.m[2], axis=1) < threshold
     if inliers.sum() < 4:
         raise VisibilityBuilderError(f'{method}: no consensus: {int(inliers.sum())} inliers '
                                      f'of {n} correspondences (needs 4)')
+    Va, Vb, Vc = frame.pans
+    R_b = frame.rotation_ab
+    ma, mb, mc = frame.m
     a, b = coef[:, 0], coef[:, 1]
     ya, yb = ma[inliers, 1] - ma[inliers, 1].mean(), mb[inliers, 1] - mb[inliers, 1].mean()
     s = float(ya @ yb / (ya @ ya)) if ya @ ya > 0 else math.nan
@@ -1011,7 +1063,6 @@ def linear_combination_of_views(rays_model_a: np.ndarray, rays_model_b: np.ndarr
     in_b = np.array([cb * rel[0] + sb * rel[1], -sb * rel[0] + cb * rel[1]])
     theta_b = float(wrap_angle(theta_a - yaw_ab))
     phi_b = float(math.atan2(in_b[1], in_b[0]))
-    fa, fb, fc = fa @ Va, fb @ Vb, fc @ Vc
     motion_a = _finish(theta_a, phi_a, fa, fc, inliers, method, noise_floor)
     motion_b = _finish(theta_b, phi_b, fb, fc, inliers, method, noise_floor)
     return motion_a, motion_b
