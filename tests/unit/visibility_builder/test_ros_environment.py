@@ -170,3 +170,21 @@ def test_doctor_tf2_report_here_matches_jazzy() -> None:
     assert problem == ''
     assert lines[0].startswith('tf2_msgs:      importable (')
     assert lines[-1].endswith(': match')
+
+
+def test_rcl_error_at_init_becomes_one_line() -> None:
+    # The backstop for what the environment check cannot see: rcl's own message, one line,
+    # without the C source location rcl appends.
+    import rclpy
+
+    from visibility_builder.ros_tools.session import rcl_errors_as_one_line
+
+    context = rclpy.Context()
+    with pytest.raises(VisibilityBuilderError) as info:
+        with rcl_errors_as_one_line('initialise ROS 2'):
+            rclpy.init(args=['vbn', '--ros-args', '-r'], context=context)
+    message = str(info.value)
+    assert message.startswith('cannot initialise ROS 2: failed to initialize rcl: ')
+    assert '-r flag' in message
+    assert '\n' not in message and ', at /' not in message
+    context.try_shutdown()
