@@ -1,4 +1,4 @@
-"""``vbn doctor``: report the toolchain and prove a two-process DDS exchange."""
+"""``vbn doctor``: report the toolchain and ROS environment, prove a two-process DDS exchange."""
 from __future__ import annotations
 
 import argparse
@@ -15,9 +15,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``doctor`` subcommand."""
     parser = subparsers.add_parser(
         'doctor', help='print versions and check a two-process DDS exchange',
-        description='Print the Python, rclpy, RMW, OpenCV and rosbags versions, then start '
-                    'an echo node in a second process and exchange a message with it over '
-                    'DDS. Exit 0 only when the message came back.')
+        description='Print the Python, rclpy, RMW, OpenCV and rosbags versions, check the '
+                    'ROS 2 environment variables (ROS_DOMAIN_ID, RMW_IMPLEMENTATION, '
+                    'ROS_AUTOMATIC_DISCOVERY_RANGE, ROS_LOCALHOST_ONLY), report whether '
+                    'tf2_msgs is importable and its TFMessage type hash matches ROS 2 '
+                    "Jazzy's, then start an echo node in a second process and exchange a "
+                    'message with it over DDS. Exit 0 only when the message came back and '
+                    'nothing above failed; the last line is the verdict.')
     parser.add_argument('--timeout', type=float, default=30.0,
                         help='seconds to wait for discovery and the echo (default 30)')
     parser.set_defaults(func=run)
