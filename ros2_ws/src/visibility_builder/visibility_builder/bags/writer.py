@@ -37,7 +37,7 @@ from typing import Any
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
-from landmark_db.atomic import atomic_output
+from landmark_db.atomic import atomic_output, check_output_folder
 from landmark_db.errors import LandmarkDbError
 from visibility_builder.bags.qos import parse_qos_profiles
 from visibility_builder.bags.serialization import (
@@ -115,7 +115,10 @@ class BagWriter:
         """
         if self._writer is not None:
             raise VisibilityBuilderError(f'bag {self.path} is already open')
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            check_output_folder(self.path)  # never create missing parents: say which
+        except LandmarkDbError as error:
+            raise VisibilityBuilderError(str(error)) from None
         if self.atomic:
             self._scratch = Path(tempfile.mkdtemp(
                 prefix=f'.{self.path.name}.tmp-', dir=self.path.parent))

@@ -1,7 +1,7 @@
 """Message conversions of the bag synthesis: numpy and dataclasses to rosbags messages.
 
 The only synthesis module that touches ROS message types (through
-:data:`visibility_builder.bag_io.TYPESTORE`, ROS 2 Jazzy definitions). Frame names
+:data:`visibility_builder.bags.TYPESTORE`, ROS 2 Jazzy definitions). Frame names
 follow REP 105 and the project's design: ``map``, ``odom``, ``base_link`` and the
 optical ``camera`` frame.
 """
