@@ -95,17 +95,33 @@ def test_transitivity_over_a_chain_of_adjacent_poses():
     assert result.visibility.sum() == 5
 
 
-def test_strict_transitivity_rejects_a_chain_whose_ends_do_not_match():
+def test_transitivity_check_rejects_a_chain_whose_ends_are_far_apart():
     poses = [feats(4.0 * i) for i in range(5)]
     loose = correspondence_classes(poses, path(5), ClassConfig(tau=5, gamma=2))
     strict = correspondence_classes(poses, path(5),
-                                    ClassConfig(tau=5, gamma=2, transitivity=True))
+                                    ClassConfig(tau=5, gamma=2, transitivity=7))
     assert loose.n_classes == 1           # 0~4~8~12~16; poses 2 apart are 8 > tau
-    assert strict.n_classes == 0
+    assert strict.n_classes == 0          # ... and 8 > 7
     assert strict.stats['excluded_transitivity'] == 1
-    close = [feats(1.0 * i) for i in range(5)]   # every pair within gamma matches
-    assert correspondence_classes(close, path(5), ClassConfig(
-        tau=5, gamma=2, transitivity=True)).n_classes == 1
+    wide = ClassConfig(tau=5, gamma=2, transitivity=8.5)
+    assert correspondence_classes(poses, path(5), wide).n_classes == 1
+
+
+def test_repeated_pattern_within_one_pose_is_excluded():
+    # Pose 0 sees two near-identical features (a tiled wall); pose 1 one of them.
+    pose0 = feats(0.0, 3.0)
+    pose1 = feats(0.5)
+    same = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=5, gamma=1))
+    off = correspondence_classes([pose0, pose1], path(2),
+                                 ClassConfig(tau=5, gamma=1, same_pose=False))
+    assert same.n_classes == 0
+    # without the v = w pair, f1 -> g (2.5) is non-symmetric anyway; a repeat that
+    # the other pose does not reach is only caught by the same-pose comparison:
+    far = [feats(0.0, 3.0), feats(0.0, axis=4) + 300]
+    assert correspondence_classes(far, path(2), ClassConfig(tau=5, gamma=1)).n_classes == 1
+    assert correspondence_classes(far, path(2), ClassConfig(
+        tau=5, gamma=1, same_pose=False)).n_classes == 3
+    assert off.n_classes == 0
 
 
 def test_ratio_test_rejects_ambiguous_nearest_neighbours():
@@ -174,7 +190,7 @@ def test_empty_poses_and_no_edges():
 
 @pytest.mark.parametrize('kwargs, message', [
     ({'tau': 0}, 'tau'), ({'gamma': 0}, 'gamma'), ({'ratio': 1.5}, 'ratio'),
-    ({'workers': 0}, 'workers'),
+    ({'workers': 0}, 'workers'), ({'transitivity': -1.0}, 'transitivity'),
 ])
 def test_bad_config_is_one_clear_error(kwargs, message):
     with pytest.raises(VisibilityBuilderError, match=message):

@@ -41,6 +41,17 @@ Departures from the text, with reasons:
 * **Several images per pose** (four pinhole headings, say) are given as one
   concatenated feature set per pose, as the thesis asks ("integrated into a unique
   panorama").
+* **The pair v = w** (delta(v, v) = 0 <= gamma) is compared with a feature never its
+  own nearest neighbour (``same_pose``, on by default). Read literally, every feature
+  is its own nearest neighbour there and the pair teaches nothing; read this way, two
+  features of one image closer than tau (a repeated pattern: tiles, bricks) either
+  merge, breaking local uniqueness, or are not mutual, breaking symmetry, so both are
+  excluded, as the text after (6.3) wants for repeated scene features.
+* **Optional transitivity check** (``transitivity``, off by default): the closure
+  chains f ~ g ~ h although f and h may be far apart; the thesis says gamma bounds
+  how far "violations to the symmetry and transitivity properties" are checked but
+  Figure 6.3 only checks symmetry and uniqueness. With a distance set, a class is
+  excluded when two members seen from poses within gamma are farther apart than it.
 * **Optional ratio test** (``ratio``, Lowe 2004): a nearest neighbour within tau whose
   distance is not below ``ratio`` times the second-nearest distance in the same image
   set is ambiguous and is treated like a non-symmetric match (both classes are
@@ -92,13 +103,20 @@ class ClassConfig:
             than ``ratio`` times the second nearest counts as a non-symmetric match.
             ``None`` disables the test.
         workers: processes that compute the pose-pair matches (1: in this process).
+        same_pose: also compare each pose with itself, a feature never being its own
+            neighbour: a feature with another feature of its own pose within ``tau``
+            (a repeated pattern in one image) excludes both classes.
+        transitivity: if set, a class is also excluded when two of its features, seen
+            from poses at most ``gamma`` apart, are farther apart than this distance
+            (the closure chained them through intermediate poses). ``None``: off.
     """
 
-    tau: float = 250.0
-    gamma: int = 3
+    tau: float = 120.0
+    gamma: int = 2
     ratio: float | None = None
     workers: int = 1
-    transitivity: bool = False
+    same_pose: bool = True
+    transitivity: float | None = None
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tau, (int, float)) and math.isfinite(self.tau)
@@ -113,6 +131,10 @@ class ClassConfig:
         if isinstance(self.workers, bool) or not isinstance(self.workers, (int, np.integer)) \
                 or self.workers < 1:
             raise VisibilityBuilderError(f'workers must be an integer >= 1, got {self.workers!r}')
+        if self.transitivity is not None and not (
+                isinstance(self.transitivity, (int, float)) and self.transitivity > 0):
+            raise VisibilityBuilderError(
+                f'transitivity must be a positive distance or None, got {self.transitivity!r}')
 
 
 @dataclass
@@ -265,6 +287,9 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
 
     mutual = [r[0] for r in results]
     broken = [r[1] for r in results]
+    if config.same_pose:
+        broken.extend(_repeated_in_pose(d, tau2) + offsets[v]
+                      for v, d in enumerate(descriptors) if len(d) > 1)
     merged = np.concatenate(mutual) if mutual else np.zeros((0, 2), dtype=np.int64)
     broken_ids = np.unique(np.concatenate(broken)) if broken else np.zeros(0, dtype=np.int64)
     tested = sum(r[2] for r in results)
@@ -286,14 +311,15 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
     excluded_unique = np.zeros(n_components, dtype=bool)
     excluded_unique[repeated] = True
     excluded_unique &= ~excluded_sym
-    # Transitivity within gamma: every two features of a class seen from poses at most
-    # gamma apart must be a mutual match themselves (the closure may chain f ~ g ~ h
-    # while f and h, compared directly, are not related).
+    # Transitivity within gamma: the closure may chain f ~ g ~ h while f and h, seen
+    # from poses gamma or fewer apart, are farther than tau from each other.
     excluded_trans = np.zeros(n_components, dtype=bool)
-    if config.transitivity and len(pairs):
-        excluded_trans = _breaks_transitivity(component, pose_of, merged, pairs,
-                                              n_components, n_poses)
-        excluded_trans &= ~(excluded_sym | excluded_unique)
+    if config.transitivity is not None and len(pairs):
+        sizes = np.bincount(component, minlength=n_components)
+        candidates = (sizes > 1) & ~(excluded_sym | excluded_unique)
+        excluded_trans = _breaks_transitivity(component, pose_of, descriptors, offsets,
+                                              pairs, n_components,
+                                              float(config.transitivity) ** 2, candidates)
     keep = ~(excluded_sym | excluded_unique | excluded_trans)
 
     new_id = np.full(n_components, -1, dtype=np.int64)
@@ -330,25 +356,51 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
     return ClassResult(labels, n_classes, visibility, stats)
 
 
-def _breaks_transitivity(component: np.ndarray, pose_of: np.ndarray, merged: np.ndarray,
-                         pairs: np.ndarray, n_components: int, n_poses: int) -> np.ndarray:
-    """Components whose members at poses within gamma are not all mutual matches.
+def _breaks_transitivity(component: np.ndarray, pose_of: np.ndarray,
+                         descriptors: list[np.ndarray], offsets: np.ndarray,
+                         pairs: np.ndarray, n_components: int, tau2: float,
+                         candidates: np.ndarray) -> np.ndarray:
+    """Components with two members, at poses within gamma, farther apart than tau.
 
-    With at most one feature per pose (local uniqueness) a component seen from the pose
-    set S is transitive within gamma exactly when its mutual matches number as many as
-    the pairs of S within gamma; each such pair holds at most one mutual match.
+    Only components in ``candidates`` (bool per component: several members and one
+    per pose) are checked. For every compared pose pair (v, w) and every such class
+    seen from both, the two members' descriptor distance is computed directly.
     """
+    n_poses = len(descriptors)
+    member = candidates[component]
+    feat = np.flatnonzero(member)
+    broken = np.zeros(n_components, dtype=bool)
+    if feat.size == 0:
+        return broken
+    # pose x component incidence of the candidate members, holding feature id + 1
     incidence = sp.csr_matrix(
-        (np.ones(len(component), dtype=np.float32), (component, pose_of)),
-        shape=(n_components, n_poses))
-    incidence.data[:] = 1.0   # duplicates summed above: back to 0/1
-    reach = sp.csr_matrix(
-        (np.ones(2 * len(pairs), dtype=np.float32),
-         (np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]])),
-        shape=(n_poses, n_poses))
-    near_pairs = np.asarray((incidence @ reach).multiply(incidence).sum(axis=1)).ravel() / 2
-    matched = np.bincount(component[merged[:, 0]], minlength=n_components)
-    return matched < np.rint(near_pairs)
+        (feat + 1, (pose_of[feat], component[feat])), shape=(n_poses, n_components))
+    step = max(1, 4_000_000 // max(int(incidence.getnnz(axis=1).max()), 1))
+    for lo in range(0, len(pairs), step):
+        chunk = pairs[lo:lo + step]
+        left = incidence[chunk[:, 0]]
+        right = incidence[chunk[:, 1]]
+        both = left.astype(bool).multiply(right.astype(bool)).tocoo()
+        if both.nnz == 0:
+            continue
+        f = np.asarray(left[both.row, both.col]).ravel() - 1
+        h = np.asarray(right[both.row, both.col]).ravel() - 1
+        a = _gather(descriptors, offsets, f)
+        b = _gather(descriptors, offsets, h)
+        diff = a - b
+        far = np.einsum('ij,ij->i', diff, diff) > tau2
+        broken[both.col[far]] = True
+    return broken
+
+
+def _gather(descriptors: list[np.ndarray], offsets: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Rows of the concatenated descriptors by global feature id."""
+    pose = np.searchsorted(offsets, ids, side='right') - 1
+    out = np.empty((len(ids), descriptors[0].shape[1] if len(ids) else 0), np.float32)
+    for v in np.unique(pose):
+        sel = pose == v
+        out[sel] = descriptors[v][ids[sel] - offsets[v]]
+    return out
 
 
 # -- matching kernels ------------------------------------------------------------------
@@ -407,6 +459,21 @@ def _passes_ratio(d2: np.ndarray, best_d2: np.ndarray, near: np.ndarray, ratio: 
     second = np.partition(sub, 1, axis=1)[:, 1]
     passes[idx] = best_d2[idx] < (ratio * ratio) * np.maximum(second, 0.0)
     return passes
+
+
+def _repeated_in_pose(a: np.ndarray, tau2: float) -> np.ndarray:
+    """Features of one pose whose nearest *other* feature of that pose is within tau.
+
+    This is the pair v = w of Figure 6.3's loop (delta(v, v) = 0 <= gamma) with a
+    feature never its own neighbour: the related pair either merges (breaking local
+    uniqueness) or is not mutual (breaking symmetry), so both features are excluded.
+    """
+    a_sq = np.einsum('ij,ij->i', a, a)
+    d2 = _squared_distances(a, a_sq, a, a_sq)
+    np.fill_diagonal(d2, np.inf)
+    nearest = d2.argmin(axis=1)
+    close = np.flatnonzero(d2[np.arange(len(a)), nearest] <= tau2)
+    return np.unique(np.concatenate([close, nearest[close]])).astype(np.int64)
 
 
 def _chunk_by_first_pose(pairs: np.ndarray, workers: int) -> list[np.ndarray]:
