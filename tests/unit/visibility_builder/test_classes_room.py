@@ -132,5 +132,7 @@ def test_room_bag_purity_and_counts():
     print(f'room: {result.stats}, filters {kept.counts_dict()}, impure '
           f'{purity.n_impure}/{purity.n_classes}, median visibility '
           f'{np.median(kept.sizes_after)}, {time.perf_counter() - start:.1f} s')
-    assert len(kept.kept_classes) >= 250
+    # measured (docs/classes.md): 319 classes, 3 impure (0.94 %); the issue asks for
+    # at most 0.5 %, which this measure does not reach
+    assert len(kept.kept_classes) >= 280
     assert purity.impure_fraction <= 0.015
