@@ -54,12 +54,26 @@ def test_non_symmetric_match_within_tau_excludes_both_classes():
 def test_non_symmetric_neighbour_beyond_tau_is_ignored():
     pose0 = feats(0.0, 10.0)
     pose1 = feats(8.0)
-    result = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=7, gamma=1))
+    literal = ClassConfig(tau=7, gamma=1, symmetry_factor=1.0)   # Figure 6.3 as printed
+    result = correspondence_classes([pose0, pose1], path(2), literal)
     # f0 -> g is 8 > tau: no relation; f1 <-> g merge.
     assert result.n_classes == 2
     assert result.labels[0][1] == result.labels[1][0]
     assert result.labels[0][0] != result.labels[0][1]
     assert result.stats['excluded_symmetry'] == 0
+
+
+def test_symmetry_factor_widens_the_exclusion_radius_only():
+    pose0 = feats(0.0, 10.0)
+    pose1 = feats(8.0)
+    # f0 -> g is 8: beyond tau (7) but within 1.5 tau: symmetry broken, all excluded.
+    wide = correspondence_classes([pose0, pose1], path(2),
+                                  ClassConfig(tau=7, gamma=1, symmetry_factor=1.5))
+    assert wide.n_classes == 0 and wide.stats['excluded_symmetry'] == 2
+    # A mutual pair between tau and the wider radius neither merges nor excludes.
+    apart = correspondence_classes([feats(0.0), feats(9.0)], path(2),
+                                   ClassConfig(tau=7, gamma=1, symmetry_factor=1.5))
+    assert apart.n_classes == 2 and apart.stats['excluded_symmetry'] == 0
 
 
 def test_two_features_of_one_pose_in_one_class_are_excluded():
@@ -129,9 +143,10 @@ def test_ratio_test_rejects_ambiguous_nearest_neighbours():
     # with its nearest neighbour (3), the ratio test (3 >= 0.5 * 5.5) rejects it.
     pose0 = feats(0.0)
     pose1 = np.vstack([feats(3.0), feats(0.0) + np.eye(1, DIM, 1, dtype=np.float32) * 5.5])
-    plain = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=5, gamma=1))
+    plain = correspondence_classes([pose0, pose1], path(2),
+                                   ClassConfig(tau=5, gamma=1, symmetry_factor=1.0))
     ratio = correspondence_classes([pose0, pose1], path(2),
-                                   ClassConfig(tau=5, gamma=1, ratio=0.5))
+                                   ClassConfig(tau=5, gamma=1, ratio=0.5, symmetry_factor=1.0))
     assert plain.labels[0][0] == plain.labels[1][0] >= 0
     assert ratio.labels[0][0] == -1 and ratio.labels[1][0] == -1
 
@@ -191,6 +206,7 @@ def test_empty_poses_and_no_edges():
 @pytest.mark.parametrize('kwargs, message', [
     ({'tau': 0}, 'tau'), ({'gamma': 0}, 'gamma'), ({'ratio': 1.5}, 'ratio'),
     ({'workers': 0}, 'workers'), ({'transitivity': -1.0}, 'transitivity'),
+    ({'symmetry_factor': 0.5}, 'symmetry_factor'),
 ])
 def test_bad_config_is_one_clear_error(kwargs, message):
     with pytest.raises(VisibilityBuilderError, match=message):
