@@ -27,17 +27,16 @@ Implementation. The outcome of Figure 6.3 does not depend on the order in which 
 pairs and features are visited (merging only grows classes and exclusion is sticky),
 so the loops become array operations: for every unordered pair of poses within gamma
 the squared distances ``|a|^2 + |b|^2 - 2 a.b`` come from one float32 BLAS product
-(the pairs of one pose are stacked into one product), nearest neighbours in both
+(a pose's partners are stacked into products of at most 1e6 entries), nearest neighbours in both
 directions are two ``argmin`` calls, and the transitive closure is the connected
 components of the graph of mutual matches (:func:`scipy.sparse.csgraph.connected_components`).
 Complexity: O(sum over pairs of n_v n_w d) for the distances, O(N) for the rest.
 
 Departures from the text, with reasons:
 
-* **Pose pairs** are unordered and each is compared once; the nearest neighbours of
-  both directions (v -> w and w -> v) come from the same distance matrix, which is
-  what the algorithm's loop over ordered pairs computes. A pose is not compared with
-  itself (every feature is its own nearest neighbour there: nothing to learn).
+* **Pose pairs** v != w are unordered and each is compared once; the nearest
+  neighbours of both directions (v -> w and w -> v) come from the same distance
+  matrix, which is what the algorithm's loop over ordered pairs computes.
 * **Several images per pose** (four pinhole headings, say) are given as one
   concatenated feature set per pose, as the thesis asks ("integrated into a unique
   panorama").
@@ -52,7 +51,8 @@ Departures from the text, with reasons:
   is its own nearest neighbour there and the pair teaches nothing; read this way, two
   features of one image closer than tau (a repeated pattern: tiles, bricks) either
   merge, breaking local uniqueness, or are not mutual, breaking symmetry, so both are
-  excluded, as the text after (6.3) wants for repeated scene features.
+  excluded, as the text after (6.3) wants for repeated scene features. This
+  comparison uses tau itself.
 * **Optional transitivity check** (``transitivity``, off by default): the closure
   chains f ~ g ~ h although f and h may be far apart; the thesis says gamma bounds
   how far "violations to the symmetry and transitivity properties" are checked but
