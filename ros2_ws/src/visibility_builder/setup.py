@@ -24,6 +24,7 @@ setup(
     entry_points={
         'console_scripts': [
             'dds_probe = visibility_builder.dds_probe:main',
+            'builder = visibility_builder.builder_node:main',
         ],
         'vbn.commands': [
             'doctor = visibility_builder.cli.doctor:register',
@@ -32,6 +33,7 @@ setup(
             'play = visibility_builder.cli.play:register',
             'record = visibility_builder.cli.record:register',
             'render = visibility_builder.cli.render:register',
+            'build = visibility_builder.cli.build:register',
         ],
     },
 )

@@ -1,0 +1,491 @@
+"""The offline builder: from an exploration bag to a landmark database (Chapters 3, 5, 6).
+
+``build(bag, config)`` composes one module per step, in the data's order:
+
+==================== ============================================ ==========================
+step                 what                                         module
+==================== ============================================ ==========================
+read                 images, camera info, image poses             :mod:`.exploration`
+sample               sampled poses, pose graph G (6.2.1)          :mod:`.sampled_poses`
+features             SIFT per image, in parallel (8.3.2)          :mod:`.features`
+classes              correspondence classes, Algorithm 6.3        :mod:`.classes`
+filter               retain good features (6.2.2, 8.3.2)          :mod:`.filters`
+decompose            rho-MORDP regions (Chapter 5)                :mod:`landmark_db.decomposition`
+model views          two or three views, extra features (7.2)     :mod:`.model_views`
+database             one SQLite file, atomic                      :mod:`landmark_db.database`
+==================== ============================================ ==========================
+
+Each step's time and counts go into :class:`BuildReport`; ``vbn build --report`` draws
+them. Configuration is one frozen :class:`BuildConfig` (the defaults live in the step
+configs' dataclasses; ``config/builder.yaml`` repeats them for the ROS node, and a test
+keeps the two equal).
+"""
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
+import logging
+import os
+from pathlib import Path
+import time
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from landmark_db.atomic import check_output_folder
+from landmark_db.database import (
+    BuildInfo,
+    CameraIntrinsics,
+    FeatureClasses,
+    LandmarkDatabase,
+    RegionRecord,
+    SampledPoses,
+    write_database,
+)
+from landmark_db.database.model import utc_now_iso
+from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose
+from landmark_db.errors import LandmarkDbError
+from landmark_db.world import WorldInstance
+from visibility_builder.classes import ClassConfig, correspondence_classes
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.exploration import Exploration, ReadConfig, read_exploration
+from visibility_builder.features import ImageFeatures, SiftConfig, extract_many
+from visibility_builder.filters import FilterConfig, retain_good_features
+from visibility_builder.model_views import (
+    ImageTable,
+    ModelViewConfig,
+    class_descriptors,
+    extra_features,
+    select_model_views,
+)
+from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
+
+__all__ = ['BuildConfig', 'BuildReport', 'BuildResult', 'DecompositionConfig', 'build',
+           'build_from_exploration', 'config_from_flat', 'flat_config',
+           'setting_descriptions']
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DecompositionConfig:
+    """The decomposition step (Chapter 5).
+
+    Attributes:
+        algorithm: One of ``landmark_db.decomposition.ALGORITHMS``.
+        k: Features per landmark.
+        rho: Overlap radius in pose-graph steps.
+        sigma: A region must cover more than ``sigma`` otherwise uncovered poses.
+        seed: Tie-breaking seed.
+    """
+
+    algorithm: str = 'best'
+    k: int = 8
+    rho: int = 1
+    sigma: int = 3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHMS:
+            raise VisibilityBuilderError(f'unknown algorithm {self.algorithm!r}; choose one '
+                                         f'of {", ".join(ALGORITHMS)}')
+        for name, least in (('k', 1), ('rho', 0), ('sigma', 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                    or value < least:
+                raise VisibilityBuilderError(f'{name} must be an integer >= {least}, '
+                                             f'got {value!r}')
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    """Everything ``build`` needs, one frozen config per step.
+
+    Attributes:
+        read: Topics, pose source and tolerances.
+        sampling: Grouping frames into poses, graph connectivity.
+        sift: SIFT settings (stored in the database for the localizer).
+        classes: Algorithm 6.3 (tau, gamma, ratio).
+        filters: Section 6.2.2 filters.
+        decomposition: Algorithm, k, rho, sigma.
+        model_views: Views and extra features per region.
+        descriptors_per_class: Representative descriptors kept per class.
+        workers: Processes for SIFT and matching (None: every core).
+    """
+
+    read: ReadConfig = field(default_factory=ReadConfig)
+    sampling: SamplingConfig = field(default_factory=SamplingConfig)
+    sift: SiftConfig = field(default_factory=SiftConfig)
+    classes: ClassConfig = field(default_factory=ClassConfig)
+    filters: FilterConfig = field(default_factory=FilterConfig)
+    decomposition: DecompositionConfig = field(default_factory=DecompositionConfig)
+    model_views: ModelViewConfig = field(default_factory=ModelViewConfig)
+    descriptors_per_class: int = 4
+    workers: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.descriptors_per_class < 1:
+            raise VisibilityBuilderError(
+                f'descriptors_per_class must be >= 1, got {self.descriptors_per_class}')
+        if self.workers is not None and self.workers < 1:
+            raise VisibilityBuilderError(f'workers must be >= 1, got {self.workers}')
+
+    @property
+    def n_workers(self) -> int:
+        """Processes to use."""
+        return self.workers or os.cpu_count() or 1
+
+
+_SECTIONS = ('read', 'sampling', 'sift', 'classes', 'filters', 'decomposition', 'model_views')
+
+
+def flat_config(config: BuildConfig) -> dict[str, Any]:
+    """``{'section.name': value}`` of every setting (ROS parameter names, the database)."""
+    out: dict[str, Any] = {}
+    for section in _SECTIONS:
+        for key, value in asdict(getattr(config, section)).items():
+            out[f'{section}.{key}'] = value
+    out['descriptors_per_class'] = config.descriptors_per_class
+    out['workers'] = config.workers
+    return out
+
+
+def config_from_flat(values: dict[str, Any], base: BuildConfig | None = None) -> BuildConfig:
+    """Return ``base`` (default: the defaults) with ``{'section.name': value}`` applied.
+
+    Raises:
+        VisibilityBuilderError: An unknown name or a value the step refuses.
+    """
+    base = base or BuildConfig()
+    sections: dict[str, dict[str, Any]] = {s: {} for s in _SECTIONS}
+    top: dict[str, Any] = {}
+    for name, value in values.items():
+        section, _, key = name.rpartition('.')
+        if not section:
+            if name not in ('descriptors_per_class', 'workers'):
+                raise VisibilityBuilderError(f'unknown build setting {name!r}')
+            top[name] = value
+            continue
+        if section not in sections or key not in {f.name for f in fields(
+                getattr(base, section))}:
+            raise VisibilityBuilderError(f'unknown build setting {name!r}')
+        sections[section][key] = value
+    try:
+        changed = {s: replace(getattr(base, s), **v) for s, v in sections.items() if v}
+        return replace(base, **changed, **top)
+    except TypeError as error:
+        raise VisibilityBuilderError(f'bad build setting: {error}') from None
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """``{attribute: description}`` from the ``Attributes:`` block of a class docstring."""
+    docs: dict[str, str] = {}
+    lines = (cls.__doc__ or '').splitlines()
+    inside, name = False, ''
+    for line in lines:
+        stripped = line.strip()
+        if stripped == 'Attributes:':
+            inside = True
+            continue
+        if not inside:
+            continue
+        if not stripped:
+            break
+        head, sep, text = stripped.partition(':')
+        if sep and head.isidentifier() and line.startswith(' ' * 8) \
+                and not line.startswith(' ' * 12):
+            name = head
+            docs[name] = text.strip()
+        elif name:
+            docs[name] += ' ' + stripped
+    return docs
+
+
+def setting_descriptions(config: BuildConfig | None = None) -> dict[str, str]:
+    """``{'section.name': description}`` of every setting, from the config docstrings."""
+    config = config or BuildConfig()
+    out: dict[str, str] = {}
+    for section in _SECTIONS:
+        docs = _attribute_docs(type(getattr(config, section)))
+        for key in asdict(getattr(config, section)):
+            out[f'{section}.{key}'] = docs.get(key, '')
+    top = _attribute_docs(BuildConfig)
+    out['descriptors_per_class'] = top.get('descriptors_per_class', '')
+    out['workers'] = top.get('workers', '')
+    return out
+
+
+@dataclass
+class BuildReport:
+    """Counts and timings of one build (the closing figures of ``vbn build``).
+
+    Attributes:
+        seconds: Per step, wall seconds.
+        counts: Per step, named counts.
+        visibility_sizes_before: (n_classes_before,) poses per class after Algorithm 6.3.
+        visibility_sizes_after: (n_classes,) poses per class after the filters.
+    """
+
+    seconds: dict[str, float] = field(default_factory=dict)
+    counts: dict[str, dict[str, Any]] = field(default_factory=dict)
+    visibility_sizes_before: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    visibility_sizes_after: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able summary: counts and seconds per step."""
+        return {'seconds': {k: round(v, 3) for k, v in self.seconds.items()},
+                'counts': self.counts}
+
+
+@dataclass
+class BuildResult:
+    """What ``build`` made.
+
+    Attributes:
+        database: The landmark database (written to disk when a path was given).
+        world: The world instance the decomposition ran on.
+        decomposition: The decomposition.
+        sampling: The sampled poses and graph.
+        report: Counts and timings.
+    """
+
+    database: LandmarkDatabase
+    world: WorldInstance
+    decomposition: Decomposition
+    sampling: PoseSampling
+    report: BuildReport
+
+
+class _Stages:
+    """Times the steps and reports progress (``on_stage(name, fraction)``)."""
+
+    def __init__(self, report: BuildReport,
+                 on_stage: Callable[[str, str], None] | None) -> None:
+        self.report = report
+        self.on_stage = on_stage
+        self.name = ''
+        self.start = 0.0
+
+    def begin(self, name: str, detail: str = '') -> None:
+        self.name, self.start = name, time.perf_counter()
+        if self.on_stage:
+            self.on_stage(name, detail)
+        _LOG.info('%s %s', name, detail)
+
+    def end(self, **counts: Any) -> None:
+        self.report.seconds[self.name] = time.perf_counter() - self.start
+        self.report.counts[self.name] = counts
+
+
+def _camera_intrinsics(exploration: Exploration) -> CameraIntrinsics:
+    info = exploration.camera_info
+    kind = 'panoramic' if info.distortion_model == 'cylindrical' else 'pinhole'
+    return CameraIntrinsics(kind=kind, width=info.width, height=info.height,
+                            K=np.asarray(info.k, float).reshape(3, 3),
+                            D=np.asarray(info.d, float), distortion_model=info.distortion_model,
+                            frame_id=info.frame_id)
+
+
+def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
+          db_path: str | os.PathLike[str] | None = None,
+          on_stage: Callable[[str, str], None] | None = None,
+          on_image: Callable[[int], None] | None = None) -> BuildResult:
+    """Build the landmark database of an exploration bag.
+
+    Args:
+        bag: The rosbag2 directory (or ``.mcap``).
+        config: Every setting.
+        db_path: Write the database here (atomically); None: only return it.
+        on_stage: Called with ``(step name, detail)`` when a step starts.
+        on_image: Called with a count each time SIFT finished images (progress).
+
+    Raises:
+        VisibilityBuilderError: Nothing can be built (no images, no poses, too few
+            features for k, ...); the message names the problem. No file is written.
+    """
+    report = BuildReport()
+    stages = _Stages(report, on_stage)
+    stages.begin('read', str(bag))
+    exploration = read_exploration(bag, config.read)
+    stages.end(frames=len(exploration.frames), pose_source=exploration.pose_source,
+               skipped=dict(exploration.skipped))
+    return build_from_exploration(exploration, config, db_path, stages=stages,
+                                  on_image=on_image)
+
+
+def build_from_exploration(exploration: Exploration, config: BuildConfig = BuildConfig(),
+                           db_path: str | os.PathLike[str] | None = None,
+                           stages: _Stages | None = None,
+                           on_stage: Callable[[str, str], None] | None = None,
+                           on_image: Callable[[int], None] | None = None) -> BuildResult:
+    """Build from frames already read (the builder node's live mode collects them).
+
+    See :func:`build`.
+    """
+    stages = stages or _Stages(BuildReport(), on_stage)
+    report = stages.report
+    if db_path is not None:
+        _check_output(Path(db_path))
+    frames = exploration.frames
+    if not frames:
+        raise VisibilityBuilderError(f'no usable image in {exploration.path}')
+
+    stages.begin('sample')
+    sampling = sample_poses(exploration, config.sampling)
+    stages.end(poses=sampling.n_poses, edges=int(len(sampling.edges)),
+               spacing=sampling.spacing, graph=sampling.graph)
+
+    stages.begin('features', f'{len(frames)} images on {config.n_workers} process(es)')
+    results = extract_many([f.image for f in frames], config.sift, config.n_workers,
+                           progress=on_image)
+    features: list[ImageFeatures] = []
+    undecodable = 0
+    for frame, result in zip(frames, results, strict=True):
+        if isinstance(result, str):
+            _LOG.warning('image at %.3f s skipped: %s', frame.stamp_ns / 1e9, result)
+            undecodable += 1
+            features.append(ImageFeatures.empty())
+        else:
+            features.append(result)
+    n_feats = np.array([len(f) for f in features])
+    stages.end(images=len(frames), undecodable=undecodable, features=int(n_feats.sum()),
+               per_image_mean=float(n_feats.mean()), per_image_median=float(np.median(n_feats)))
+
+    stages.begin('classes')
+    pose_descriptors = [
+        np.concatenate([features[i].descriptors for i in members]).astype(np.float32)
+        for members in sampling.frames_of_pose]
+    classes = correspondence_classes(
+        pose_descriptors, sampling.edges,
+        replace(config.classes, workers=max(config.classes.workers, 1)))
+    sizes_before = np.asarray(classes.visibility.sum(axis=0)).ravel().astype(int)
+    report.visibility_sizes_before = sizes_before
+    stages.end(**{k: (int(v) if float(v).is_integer() else float(v))
+                  for k, v in classes.stats.items()})
+
+    stages.begin('filter')
+    filtered = retain_good_features(classes.visibility, sampling.grid, sampling.edges,
+                                    config.filters)
+    visibility = filtered.visibility.tocsr().astype(bool)
+    kept = np.asarray(filtered.kept_classes, np.int64)
+    report.visibility_sizes_after = np.asarray(visibility.sum(axis=0)).ravel().astype(int)
+    stages.end(**filtered.counts_dict())
+    if visibility.shape[1] == 0:
+        raise VisibilityBuilderError(
+            'no feature class survived the filters (try a lower filters.min_poses or '
+            'filters.min_block)')
+
+    stages.begin('decompose', f'{config.decomposition.algorithm}, k={config.decomposition.k}')
+    spacing = sampling.spacing
+    world = WorldInstance.from_visibility(sampling.positions, sampling.edges, visibility,
+                                          spacing=spacing, name=str(exploration.path.name))
+    per_pose = np.asarray(visibility.sum(axis=1)).ravel()
+    dc = config.decomposition
+    if per_pose.max(initial=0) < dc.k:
+        raise VisibilityBuilderError(
+            f"k={dc.k} is larger than any pose's visibility (at most "
+            f'{int(per_pose.max(initial=0))} filtered features per pose): lower --k')
+    try:
+        decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed)
+    except LandmarkDbError as error:
+        raise VisibilityBuilderError(str(error)) from None
+    coverable = int((per_pose >= dc.k).sum())
+    covered = np.zeros(sampling.n_poses, bool)
+    for region in decomposition.regions:
+        covered[region.poses] = True
+    stages.end(regions=len(decomposition.regions), k_coverable=coverable,
+               covered=int(covered[per_pose >= dc.k].sum()),
+               uncovered=int(decomposition.uncovered.size),
+               coverage=float(covered[per_pose >= dc.k].mean()) if coverable else 0.0,
+               mean_region_poses=float(np.mean([r.poses.size for r in decomposition.regions]))
+               if decomposition.regions else 0.0)
+
+    stages.begin('model_views')
+    database = _assemble(exploration, sampling, features, classes.labels, kept, visibility,
+                         decomposition, config)
+    stages.end(model_views=sum(len(r.model_views) for r in database.regions),
+               extra_features=int(sum(r.extra.size for r in database.regions)),
+               descriptors=int(database.classes.descriptors.shape[0]))
+
+    if db_path is not None:
+        stages.begin('write', str(db_path))
+        write_database(db_path, database)
+        stages.end(bytes=Path(db_path).stat().st_size)
+    return BuildResult(database, world, decomposition, sampling, report)
+
+
+def _check_output(path: Path) -> None:
+    """Fail before any work when the database could not be written."""
+    if path.is_dir():
+        raise VisibilityBuilderError(f'--db {path} is a folder, not a file')
+    try:
+        check_output_folder(path)
+    except LandmarkDbError as error:
+        raise VisibilityBuilderError(str(error)) from None
+
+
+def _assemble(exploration: Exploration, sampling: PoseSampling,
+              features: Sequence[ImageFeatures], pose_labels: Sequence[np.ndarray],
+              kept: np.ndarray, visibility: sp.csr_matrix, decomposition: Decomposition,
+              config: BuildConfig) -> LandmarkDatabase:
+    frames = exploration.frames
+    n_images = len(frames)
+    # Database class numbering: position in ``kept``; a removed class becomes -1.
+    remap = np.full(int(max(kept.max(initial=-1) + 1, 1 + max(
+        (int(lab.max(initial=-1)) for lab in pose_labels), default=-1))), -1, np.int64)
+    remap[kept] = np.arange(kept.size)
+    image_pose = np.empty(n_images, np.int64)
+    image_labels: list[np.ndarray] = [np.zeros(0, np.int64)] * n_images
+    for pose, members in enumerate(sampling.frames_of_pose):
+        labels = np.asarray(pose_labels[pose], np.int64)
+        start = 0
+        for i in members:
+            image_pose[i] = pose
+            n = len(features[i])
+            part = labels[start:start + n]
+            image_labels[i] = np.where(part >= 0, remap[np.maximum(part, 0)], -1)
+            start += n
+    camera = np.array([f.camera_pose for f in frames], float)
+    table = ImageTable(pose=image_pose, stamp_ns=np.array([f.stamp_ns for f in frames]),
+                       camera_xy=camera[:, :2], camera_yaw=camera[:, 2], features=features,
+                       labels=image_labels)
+
+    # Representative descriptors: features whose (pose, class) survived the filters.
+    vis = visibility.tocsr()
+    cls_list, desc_list, pos_list = [], [], []
+    for i in range(n_images):
+        labels = image_labels[i]
+        valid = np.flatnonzero(labels >= 0)
+        if valid.size == 0:
+            continue
+        keep = valid[np.asarray(vis[image_pose[i], labels[valid]].todense()).ravel()]
+        cls_list.append(labels[keep])
+        desc_list.append(features[i].descriptors[keep])
+        pos_list.append(np.repeat(camera[i:i + 1, :2], keep.size, axis=0))
+    descriptors, offsets = class_descriptors(
+        np.concatenate(cls_list), np.concatenate(desc_list), np.concatenate(pos_list),
+        vis.shape[1], config.descriptors_per_class)
+
+    regions = []
+    for region in decomposition.regions:
+        landmark = np.asarray(region.features, np.int64)
+        extra = extra_features(vis, region.poses, landmark, config.model_views)
+        views = select_model_views(table, region.poses, landmark, extra, config.model_views)
+        regions.append(RegionRecord(poses=region.poses, landmark=landmark, extra=extra,
+                                    model_views=views))
+
+    dc = config.decomposition
+    info = BuildInfo(
+        k=dc.k, rho=dc.rho, sigma=dc.sigma, algorithm=dc.algorithm,
+        pose_source=exploration.pose_source, source_bag=str(exploration.path),
+        created_utc=utc_now_iso(), camera=_camera_intrinsics(exploration),
+        frames=dict(exploration.frame_ids), sift=config.sift.as_dict(),
+        parameters={k: v for k, v in flat_config(config).items()
+                    if not k.startswith(('sift.', 'decomposition.'))},
+        decomposition_seconds=float(decomposition.seconds))
+    poses = SampledPoses(xy=sampling.positions, yaw=sampling.yaw, grid=sampling.grid,
+                         edges=sampling.edges, spacing=sampling.spacing)
+    return LandmarkDatabase(info=info, poses=poses,
+                            classes=FeatureClasses(descriptors, offsets, vis),
+                            regions=tuple(regions), uncovered=decomposition.uncovered)
