@@ -220,3 +220,13 @@ def test_bad_inputs_are_clear_errors():
         correspondence_classes([feats(1.0), feats(2.0)], np.array([[0, 5]]))
     with pytest.raises(VisibilityBuilderError, match='NaN'):
         correspondence_classes([np.full((1, DIM), np.nan, np.float32)], np.zeros((0, 2), int))
+
+
+def test_single_threaded_blas_restores_the_thread_count():
+    from visibility_builder.classes import _openblas_thread_controls, single_threaded_blas
+
+    controls = _openblas_thread_controls()
+    before = [get() for get, _ in controls]
+    with single_threaded_blas():
+        assert all(get() == 1 for get, _ in controls)
+    assert [get() for get, _ in controls] == before
