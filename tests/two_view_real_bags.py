@@ -31,10 +31,11 @@ from visibility_builder.exploration import read_exploration  # noqa: E402
 from visibility_builder.features import extract_features  # noqa: E402
 from visibility_builder.geometry import camera_from_info, wrap_angle  # noqa: E402
 from visibility_builder.geometry.localize import position_from_two_views  # noqa: E402
-from visibility_builder.geometry.two_view import relative_motion  # noqa: E402
+from visibility_builder.geometry.two_view import TwoViewConfig, relative_motion  # noqa: E402
 from visibility_builder.images import decode_image  # noqa: E402
 
-METHODS = ('panoramic_planar', 'general_essential', 'pinhole_planar')
+# ':raw' is the method as the thesis gives it, without the Gauss-Newton polish.
+METHODS = ('panoramic_planar', 'panoramic_planar:raw', 'pinhole_planar', 'general_essential')
 
 
 class _Features:
@@ -69,8 +70,10 @@ def solve(camera, feats_model, feats_current, method: str):
     """Return the motion to the current view, the match count and the solve's CPU time."""
     pairs = match(feats_model[1], feats_current[1])
     uv_model, uv_current = feats_model[0][pairs[:, 0]], feats_current[0][pairs[:, 1]]
+    config = TwoViewConfig(refine=not method.endswith(':raw'))
     start = time.perf_counter()
-    motion = relative_motion(uv_model, uv_current, camera, method=method, rng=0)
+    motion = relative_motion(uv_model, uv_current, camera, method=method.split(':')[0],
+                             config=config, rng=0)
     return motion, len(pairs), time.perf_counter() - start
 
 

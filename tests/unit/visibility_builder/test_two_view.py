@@ -83,11 +83,11 @@ def test_the_camera_kind_picks_the_method_and_a_parameter_overrides_it():
     rng = np.random.default_rng(3)
     pano = render_views(PANO, _pano_poses(rng), rng)
     pin = render_views(PIN, _pin_poses(rng), rng)
-    assert relative_motion(pano.uv[0], pano.uv[1], PANO).method == 'panoramic_planar'
-    assert relative_motion(pin.uv[0], pin.uv[1], PIN).method == 'pinhole_planar'
-    assert relative_motion(pin.uv[0], pin.uv[1], PIN,
+    assert relative_motion(pano.uv[0], pano.uv[1], PANO, rng=0).method == 'panoramic_planar'
+    assert relative_motion(pin.uv[0], pin.uv[1], PIN, rng=0).method == 'pinhole_planar'
+    assert relative_motion(pin.uv[0], pin.uv[1], PIN, rng=0,
                            method='general_essential').method == 'general_essential'
-    assert relative_motion(pano.uv[0], pano.uv[1], PANO,
+    assert relative_motion(pano.uv[0], pano.uv[1], PANO, rng=0,
                            method='general_essential').direction.shape == (3,)
 
 
@@ -99,7 +99,7 @@ def test_directions_and_angles_follow_rep_103_in_the_model_cameras_frame():
 
     def motion(model, current):
         uv = [PANO.project(world_points_to_camera(p, 1.2, points))[0] for p in (model, current)]
-        return relative_motion(uv[0], uv[1], PANO)
+        return relative_motion(uv[0], uv[1], PANO, rng=0)
 
     ahead = motion(np.array([0.0, 0.0, 0.0]), np.array([0.5, 0.0, 0.0]))
     np.testing.assert_allclose(ahead.direction, [1.0, 0.0], atol=1e-9)
@@ -200,7 +200,7 @@ def test_covariance_is_positive_definite_and_grows_with_noise():
     traces = []
     for noise in (0.25, 1.0, 3.0):
         views = render_views(PANO, poses, np.random.default_rng(9), noise_px=noise)
-        motion = relative_motion(views.uv[0], views.uv[1], PANO,
+        motion = relative_motion(views.uv[0], views.uv[1], PANO, rng=0,
                                  config=TwoViewConfig(threshold_px=max(1.5, 3 * noise)))
         assert np.all(np.linalg.eigvalsh(motion.covariance) > 0)
         traces.append(np.trace(motion.covariance))
@@ -237,17 +237,28 @@ def test_points_on_the_horizon_are_refused_by_the_panoramic_method():
     points = np.column_stack([rng.uniform(0, 6, 40), np.full(40, 3.0), np.full(40, 1.2)])
     uv = [PANO.project(world_points_to_camera(p, 1.2, points))[0] for p in poses]
     with pytest.raises(VisibilityBuilderError, match='off the horizon.*got 0 of 40'):
-        relative_motion(uv[0], uv[1], PANO)
+        relative_motion(uv[0], uv[1], PANO, rng=0)
 
 
 @pytest.mark.parametrize('camera,method', [(PANO, m) for m in PANO_METHODS]
                          + [(PIN, m) for m in PIN_METHODS])
-def test_identical_poses_are_refused(camera, method):
-    rng = np.random.default_rng(8)
-    pose = (_pano_poses if camera is PANO else _pin_poses)(rng)[0]
-    views = render_views(camera, np.stack([pose, pose]), rng)
-    with pytest.raises(VisibilityBuilderError, match='same place'):
-        relative_motion(views.uv[0], views.uv[1], camera, method=method)
+@pytest.mark.parametrize('noise', [0.0, 0.5])
+def test_identical_poses_are_refused(camera, method, noise):
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+        pose = (_pano_poses if camera is PANO else _pin_poses)(rng)[0]
+        views = render_views(camera, np.stack([pose, pose]), rng, noise_px=noise)
+        with pytest.raises(VisibilityBuilderError, match='same place'):
+            relative_motion(views.uv[0], views.uv[1], camera, method=method, rng=seed)
+
+
+@pytest.mark.parametrize('method', PANO_METHODS)
+def test_two_centimetres_apart_are_not_refused_without_noise(method):
+    rng = np.random.default_rng(9)
+    pose = _pano_poses(rng)[0]
+    views = render_views(PANO, np.stack([pose, pose + [0.02, 0.0, 0.1]]), rng)
+    motion = relative_motion(views.uv[0], views.uv[1], PANO, method=method, rng=0)
+    assert max(_errors(motion, views)) < 1e-6
 
 
 def test_unknown_method_and_wrong_camera_are_refused():

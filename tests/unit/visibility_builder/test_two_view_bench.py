@@ -23,7 +23,7 @@ def test_two_view_error_against_pixel_noise():
     print(out.stdout)
     rows = [line for line in out.stdout.splitlines() if line.startswith('| pan')
             or line.startswith('| pin')]
-    assert len(rows) == 6
+    assert len(rows) == 9
     for row in rows:
         if 'linear_combination' in row:
             continue
