@@ -34,6 +34,7 @@ setup(
             'record = visibility_builder.cli.record:register',
             'render = visibility_builder.cli.render:register',
             'build = visibility_builder.cli.build:register',
+            'bench-build = visibility_builder.cli.bench_build:register',
         ],
     },
 )
