@@ -52,6 +52,7 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.exploration import Exploration, ReadConfig, read_exploration
 from visibility_builder.features import ImageFeatures, SiftConfig, extract_many
 from visibility_builder.filters import FilterConfig, retain_good_features
+from visibility_builder.geometry.frames import compose_poses, invert_pose
 from visibility_builder.model_views import (
     ImageTable,
     ModelViewConfig,
@@ -481,8 +482,12 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
         pose_source=exploration.pose_source, source_bag=str(exploration.path),
         created_utc=utc_now_iso(), camera=_camera_intrinsics(exploration),
         frames=dict(exploration.frame_ids), sift=config.sift.as_dict(),
-        parameters={k: v for k, v in flat_config(config).items()
-                    if not k.startswith(('sift.', 'decomposition.'))},
+        parameters={**{k: v for k, v in flat_config(config).items()
+                       if not k.startswith(('sift.', 'decomposition.'))},
+                    # The camera's planar pose on base_link (x, y, yaw): the localizer
+                    # turns the camera pose it computes into base_link's with it.
+                    'camera_mount': [round(float(v), 9) for v in compose_poses(
+                        invert_pose(frames[0].base_pose), frames[0].camera_pose)]},
         decomposition_seconds=float(decomposition.seconds))
     poses = SampledPoses(xy=sampling.positions, yaw=sampling.yaw, grid=sampling.grid,
                          edges=sampling.edges, spacing=sampling.spacing)
