@@ -1,0 +1,110 @@
+"""Settings of the localizer core, one frozen dataclass (defaults in config/localizer.yaml).
+
+Every field is a ROS parameter of the node under the same name; the YAML file in the
+package's ``config/`` repeats the defaults and a test keeps the two equal.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+import math
+from typing import Any
+
+from landmark_localizer.errors import LocalizerError
+
+__all__ = ['LocalizerConfig']
+
+
+@dataclass(frozen=True)
+class LocalizerConfig:
+    """How the localizer votes, tracks, switches and solves.
+
+    Attributes:
+        method: two-view method, '' to let the database's camera model pick it
+            (panoramic_planar, pinhole_planar or general_essential).
+        vote_ratio: Lowe's ratio between the best and second-best class of a query
+            feature when voting.
+        vote_max_distance: largest SIFT distance of a vote.
+        vote_min_votes: least votes of a candidate region; 0 means the database's k.
+        vote_candidates: candidate regions verified geometrically, most votes first.
+        verify_ratio: ratio test when matching the current image to a model view.
+        min_inliers: least correspondences a model view must keep in a pose solve.
+        max_residual_px: largest RMS epipolar error of a model view's solve, pixels.
+        min_tracked: fewer region features tracked than this means the features are
+            lost (the thesis's "the expected k features are not all visible").
+        lk_window: Lucas-Kanade window, pixels (odd).
+        lk_levels: Lucas-Kanade pyramid levels above the image.
+        lk_max_error_px: forward-backward disagreement above which a track is dropped.
+        redetect_radius_px: half-size of the window searched around a feature's
+            predicted position when its track is lost.
+        redetect_per_frame: at most this many lost features searched per frame.
+        refresh_per_frame: tracked features re-anchored on a SIFT keypoint per frame
+            (round robin; bounds Lucas-Kanade drift).
+        redetect_max_distance: largest SIFT distance of a re-detected feature.
+        predict_horizon_s: how far ahead the motion is predicted for switching.
+        border_margin: a prediction closer than this (in pose-grid spacings) to a pose
+            outside the region counts as near its border.
+        max_jump_m: a pose further than this from the prediction is distrusted:
+            the robot may have been kidnapped, so it votes again.
+        third_view_min_angle_deg: below this angle between the rays of two model views,
+            a third view of the region is used where it exists.
+        max_position_std_m: poses with a larger position standard deviation are not
+            published.
+        hint_radius_m: /initialpose restricts voting to regions with a pose this close.
+        seed: random generator seed of the robust solvers.
+    """
+
+    method: str = ''
+    vote_ratio: float = 0.85
+    vote_max_distance: float = 250.0
+    vote_min_votes: int = 0
+    vote_candidates: int = 4
+    verify_ratio: float = 0.85
+    min_inliers: int = 8
+    max_residual_px: float = 2.0
+    min_tracked: int = 8
+    lk_window: int = 21
+    lk_levels: int = 3
+    lk_max_error_px: float = 1.0
+    redetect_radius_px: float = 12.0
+    redetect_per_frame: int = 8
+    refresh_per_frame: int = 4
+    redetect_max_distance: float = 280.0
+    predict_horizon_s: float = 0.6
+    border_margin: float = 1.0
+    max_jump_m: float = 0.75
+    third_view_min_angle_deg: float = 15.0
+    max_position_std_m: float = 0.5
+    hint_radius_m: float = 1.5
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise LocalizerError(f'{f.name} must be finite, got {value}')
+        if self.method not in ('', 'panoramic_planar', 'pinhole_planar', 'general_essential'):
+            raise LocalizerError(f'unknown method {self.method!r} (expected panoramic_planar, '
+                                 f'pinhole_planar, general_essential or empty)')
+        for name in ('vote_ratio', 'verify_ratio'):
+            if not 0 < getattr(self, name) <= 1:
+                raise LocalizerError(f'{name} must be in (0, 1], got {getattr(self, name)}')
+        for name in ('vote_candidates', 'min_inliers', 'min_tracked', 'lk_window'):
+            if getattr(self, name) < 1:
+                raise LocalizerError(f'{name} must be >= 1, got {getattr(self, name)}')
+        if self.lk_window % 2 == 0:
+            raise LocalizerError(f'lk_window must be odd, got {self.lk_window}')
+
+    def as_dict(self) -> dict[str, Any]:
+        """Return the settings as a dict (the node's parameters)."""
+        return asdict(self)
+
+    def with_values(self, values: dict[str, Any]) -> LocalizerConfig:
+        """Return a copy with ``values`` applied; unknown names are an error."""
+        known = {f.name for f in fields(self)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise LocalizerError(f'unknown localizer setting {unknown[0]!r}')
+        try:
+            return replace(self, **values)
+        except TypeError as error:
+            raise LocalizerError(f'bad localizer setting: {error}') from None

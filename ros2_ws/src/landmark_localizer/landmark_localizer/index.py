@@ -1,0 +1,226 @@
+"""The database as the localizer uses it, prepared once at start-up (thesis 3.1.4, 7.1).
+
+:class:`DatabaseIndex` holds, from a :class:`~landmark_db.database.LandmarkDatabase`:
+
+- the descriptor index for voting: every class's representative descriptors as one
+  float32 matrix with their squared norms, so that matching a query image is one BLAS
+  product (the database holds a few descriptors per class, thousands in all);
+- the feature-to-region membership (voting) and the region graph (switching);
+- per region, its features (landmark then extra) and its model views as arrays;
+- per class, a 3-D point triangulated from the model views that show it: the
+  localizer predicts where a feature should appear in the current image from the
+  current pose, to re-detect a lost track or pick up a new region's features after a
+  switch (the pose itself always comes from the two model views, Section 7.4);
+- the sampled poses in a KD-tree, for "which region contains this position".
+
+Nothing here depends on the size of the database at run time except voting in LOST.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from landmark_db.database import LandmarkDatabase
+from landmark_localizer.errors import LocalizerError
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.geometry.camera import CameraModel, camera_from_info
+from visibility_builder.geometry.frames import BASE_TO_CAMERA_ROTATION
+
+__all__ = ['DatabaseIndex', 'RegionData', 'ViewData']
+
+
+@dataclass(frozen=True)
+class ViewData:
+    """One model view as arrays.
+
+    Attributes:
+        pose: (3,) camera pose (x, y, yaw) in ``map``.
+        class_ids: (m,) classes of its features (>= 0 only).
+        keypoints: (m, 2) float64 pixels.
+        descriptors: (m, 128) float32.
+        position: ``{class id: row}``.
+    """
+
+    pose: np.ndarray
+    class_ids: np.ndarray
+    keypoints: np.ndarray
+    descriptors: np.ndarray
+    position: dict[int, int]
+
+
+@dataclass(frozen=True)
+class RegionData:
+    """One region as the localizer uses it.
+
+    Attributes:
+        index: Region index in the database.
+        poses: (p,) sorted pose indices.
+        features: (k + e,) landmark then extra class ids.
+        landmark: (k,) landmark class ids.
+        views: Its model views.
+    """
+
+    index: int
+    poses: np.ndarray
+    features: np.ndarray
+    landmark: np.ndarray
+    views: tuple[ViewData, ...]
+
+
+class _CameraInfo:
+    """CameraInfo-like view of the database's intrinsics (for ``camera_from_info``)."""
+
+    def __init__(self, camera: Any) -> None:
+        self.width, self.height = camera.width, camera.height
+        self.distortion_model = camera.distortion_model
+        self.k = np.asarray(camera.K, float).reshape(-1)
+        self.d = np.asarray(camera.D, float).reshape(-1)
+
+
+class DatabaseIndex:
+    """Everything the localizer looks up, built once from the database.
+
+    Args:
+        database: The landmark database (``landmark_db.database.open_database``).
+
+    Raises:
+        LocalizerError: A database the localizer cannot use (no region, a camera
+            model it does not know).
+    """
+
+    def __init__(self, database: LandmarkDatabase) -> None:
+        if database.n_regions == 0:
+            raise LocalizerError('the database has no region: nothing to localize against')
+        self.database = database
+        self.k = int(database.info.k)
+        try:
+            self.camera: CameraModel = camera_from_info(_CameraInfo(database.info.camera))
+        except VisibilityBuilderError as error:
+            raise LocalizerError(f'database camera: {error}') from None
+        mount = database.info.parameters.get('camera_mount', [0.0, 0.0, 0.0])
+        self.camera_mount = np.asarray(mount, float).reshape(3)
+        classes = database.classes
+        self.descriptors = classes.descriptors.astype(np.float32)
+        self.descriptor_norms = np.einsum('ij,ij->i', self.descriptors, self.descriptors)
+        self.descriptor_class = np.asarray(classes.descriptor_classes, np.int64)
+        self.n_classes = classes.n_classes
+        self.membership: sp.csr_matrix = database.membership.tocsr()  # (classes, regions)
+        self.regions = tuple(self._region(i, r) for i, r in enumerate(database.regions))
+        self.region_poses: sp.csr_matrix = database.region_poses.tocsr()  # (regions, poses)
+        self.pose_regions: sp.csc_matrix = self.region_poses.tocsc()
+        self.xy = np.asarray(database.poses.xy, float)
+        self.tree = cKDTree(self.xy)
+        self.spacing = float(database.poses.spacing or _median_spacing(self.tree, self.xy))
+        adjacency = database.adjacency
+        n = database.n_regions
+        pairs = np.asarray(adjacency.pairs, np.int64).reshape(-1, 2)
+        graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+        self.region_graph = (graph + graph.T).tocsr()
+        self.points = self._triangulate()
+
+    # -- construction ------------------------------------------------------------------
+    @staticmethod
+    def _region(index: int, record: Any) -> RegionData:
+        views = []
+        for view in record.model_views:
+            keep = np.flatnonzero(view.class_ids >= 0)
+            ids = view.class_ids[keep].astype(np.int64)
+            views.append(ViewData(
+                pose=np.array([view.x, view.y, view.yaw]), class_ids=ids,
+                keypoints=view.keypoints[keep].astype(np.float64),
+                descriptors=view.descriptors[keep].astype(np.float32),
+                position={int(c): i for i, c in enumerate(ids)}))
+        return RegionData(index, np.asarray(record.poses, np.int64),
+                          np.asarray(record.features, np.int64),
+                          np.asarray(record.landmark, np.int64), tuple(views))
+
+    def rays_in_map(self, view_pose: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """(n, 3) unit directions in ``map`` (z up) of pixels seen from a camera pose."""
+        rays = self.camera.unproject(np.asarray(uv, float).reshape(-1, 2))
+        base = rays @ BASE_TO_CAMERA_ROTATION.T
+        c, s = math.cos(view_pose[2]), math.sin(view_pose[2])
+        return np.stack([c * base[:, 0] - s * base[:, 1], s * base[:, 0] + c * base[:, 1],
+                         base[:, 2]], axis=1)
+
+    def _triangulate(self) -> np.ndarray:
+        """(n_classes, 3) points relative to the camera height (NaN: not triangulated).
+
+        For each class, the rays of every model view that shows it (over all regions)
+        meet in the least-squares point; classes seen by fewer than two views, or by
+        nearly parallel rays (under 2 degrees), stay NaN.
+        """
+        ray_sum = np.zeros((self.n_classes, 3, 3))
+        rhs = np.zeros((self.n_classes, 3))
+        count = np.zeros(self.n_classes, int)
+        seen: set[tuple[int, int]] = set()
+        directions: dict[int, list[np.ndarray]] = {}
+        for region in self.regions:
+            for view in region.views:
+                key = (round(float(view.pose[0]), 6), round(float(view.pose[1]), 6))
+                dirs = self.rays_in_map(view.pose, view.keypoints)
+                origin = np.array([view.pose[0], view.pose[1], 0.0])
+                for c, d in zip(view.class_ids, dirs, strict=True):
+                    if (int(c), hash(key)) in seen:
+                        continue
+                    seen.add((int(c), hash(key)))
+                    projector = np.eye(3) - np.outer(d, d)
+                    ray_sum[c] += projector
+                    rhs[c] += projector @ origin
+                    count[c] += 1
+                    directions.setdefault(int(c), []).append(d)
+        points = np.full((self.n_classes, 3), np.nan)
+        for c in np.flatnonzero(count >= 2):
+            dirs = np.array(directions[int(c)])
+            cosines = np.clip(np.abs(dirs @ dirs.T), 0, 1)
+            if cosines.min() > math.cos(math.radians(2.0)):
+                continue
+            try:
+                points[c] = np.linalg.solve(ray_sum[c], rhs[c])
+            except np.linalg.LinAlgError:
+                continue
+        return points
+
+    # -- queries ------------------------------------------------------------------------
+    def region_contains(self, region: int, poses: np.ndarray) -> np.ndarray:
+        """(len(poses),) bool: which of the pose indices belong to the region."""
+        row = self.region_poses[region]
+        return np.isin(poses, row.indices)
+
+    def regions_of_pose(self, pose: int) -> np.ndarray:
+        """Region indices containing the pose."""
+        col = self.pose_regions[:, pose]
+        return col.indices if sp.issparse(col) else np.flatnonzero(col)
+
+    def nearest_pose(self, xy: np.ndarray) -> tuple[int, float]:
+        """Return the sampled pose nearest a position and its distance."""
+        distance, index = self.tree.query(np.asarray(xy, float)[:2])
+        return int(index), float(distance)
+
+    def project(self, camera_pose: np.ndarray, class_ids: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted pixels of classes from a camera pose: ``(uv (n, 2), valid (n,))``."""
+        pts = self.points[class_ids]
+        ok = np.all(np.isfinite(pts), axis=1)
+        x, y, yaw = (float(v) for v in camera_pose)
+        dx, dy = pts[:, 0] - x, pts[:, 1] - y
+        c, s = math.cos(yaw), math.sin(yaw)
+        base = np.stack([c * dx + s * dy, -s * dx + c * dy, pts[:, 2]], axis=1)
+        optical = base @ BASE_TO_CAMERA_ROTATION  # p_optical = M^T p_base
+        uv = np.full((len(class_ids), 2), np.nan)
+        if ok.any():
+            proj, valid = self.camera.project(optical[ok])
+            uv[ok] = proj
+            ok[ok] = valid
+        return uv, ok
+
+
+def _median_spacing(tree: cKDTree, xy: np.ndarray) -> float:
+    if len(xy) < 2:
+        return 0.25
+    distances, _ = tree.query(xy, k=2)
+    return float(np.median(distances[:, 1])) or 0.25

@@ -1,0 +1,373 @@
+"""The localizer state machine: ``step(frame) -> estimate`` (thesis Chapter 7).
+
+States:
+
+- ``LOST`` (start-up, kidnapped, or the region's features gone): every frame's SIFT
+  features vote for regions (:mod:`.voting`); the best verified candidate starts
+  ``TRACKING`` with the features it matched.
+- ``TRACKING``: the region's features are tracked (:mod:`.tracking`), the pose is
+  solved from its model views (:mod:`.pose`), lost features are re-detected where the
+  pose predicts them, and the predicted motion switches region before the features
+  fade (:mod:`.switching`). When the features are lost anyway (too few tracked, or the
+  solve fails twice, or the pose jumps away from the prediction: kidnapped), the
+  image votes among the region graph's neighbours first, then globally.
+
+Counters (:attr:`Localizer.stats`) separate region changes by prediction from those
+after a loss, as the thesis's switching rule is meant to make the second kind rare.
+Time going backwards (a bag that loops) resets the state.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import logging
+import time
+
+import numpy as np
+
+from landmark_db.database import LandmarkDatabase
+from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.errors import LocalizerError
+from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.pose import PoseSolution, base_pose, solve_pose
+from landmark_localizer.switching import MotionPredictor, choose_region
+from landmark_localizer.tracking import Tracker, Tracks
+from landmark_localizer.voting import Verified, verify, vote
+from visibility_builder.features import SiftConfig, extract_features
+from visibility_builder.geometry.frames import invert_pose
+
+__all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
+
+_LOG = logging.getLogger(__name__)
+
+LOST = 'LOST'
+TRACKING = 'TRACKING'
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One camera image and what else is known at its time.
+
+    Attributes:
+        stamp_ns: The image's stamp.
+        image: (H, W) uint8 grey image.
+        odom: (3,) ``odom -> base_link`` planar pose at the image's stamp, or None.
+    """
+
+    stamp_ns: int
+    image: np.ndarray
+    odom: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What one step found.
+
+    Attributes:
+        stamp_ns: The frame's stamp.
+        state: ``LOST`` or ``TRACKING`` after the step.
+        region: The current region, -1 when lost.
+        pose: (3,) ``base_link`` pose in ``map``, or None (no trustworthy pose).
+        covariance: (3, 3) covariance of ``(x, y, yaw)``, or None.
+        camera_pose: (3,) the camera's pose in ``map``, or None.
+        tracked: Region features used this frame.
+        event: ``'vote'``, ``'predicted_switch'``, ``'neighbour_vote'`` or
+            ``'global_vote'`` (a region change after the features were lost),
+            ``'lost'``, ``'reset'`` or ``''``.
+        seconds: Time the step took.
+    """
+
+    stamp_ns: int
+    state: str
+    region: int
+    pose: np.ndarray | None
+    covariance: np.ndarray | None
+    camera_pose: np.ndarray | None
+    tracked: int
+    event: str
+    seconds: float
+
+
+@dataclass
+class Stats:
+    """Counters over the run."""
+
+    frames: int = 0
+    poses: int = 0
+    votes: int = 0
+    predicted_switches: int = 0
+    lost_switches: int = 0
+    falls_to_lost: int = 0
+    resets: int = 0
+    events: dict[str, int] = field(default_factory=dict)
+
+
+class Localizer:
+    """Localizes camera frames against a landmark database.
+
+    Args:
+        database: The database (or a prepared :class:`DatabaseIndex`).
+        config: Settings.
+
+    Example:
+        >>> localizer = Localizer(open_database('room.db'))  # doctest: +SKIP
+        >>> estimate = localizer.step(Frame(stamp_ns, gray))  # doctest: +SKIP
+    """
+
+    def __init__(self, database: LandmarkDatabase | DatabaseIndex,
+                 config: LocalizerConfig | None = None) -> None:
+        self.index = database if isinstance(database, DatabaseIndex) else \
+            DatabaseIndex(database)
+        config = config or LocalizerConfig()
+        self.config = config
+        self.sift = SiftConfig(**{k: v for k, v in self.index.database.info.sift.items()
+                                  if k in SiftConfig.__dataclass_fields__})
+        self.detector = self.sift.create()
+        self.tracker = Tracker(self.index, config, self.detector)
+        self.predictor = MotionPredictor()
+        self.rng = np.random.default_rng(config.seed)
+        self.stats = Stats()
+        self.state = LOST
+        self.region = -1
+        self.camera_pose: np.ndarray | None = None
+        self.last_stamp: int | None = None
+        self.hint: tuple[np.ndarray, float] | None = None
+        self._failures = 0
+
+    # -- control --------------------------------------------------------------------------
+    def reset(self) -> None:
+        """Forget the region and vote globally on the next frame."""
+        self.state, self.region, self.camera_pose = LOST, -1, None
+        self.tracker.reset()
+        self.predictor.reset()
+        self._failures = 0
+        self.stats.resets += 1
+
+    def set_hint(self, x: float, y: float, radius: float | None = None) -> None:
+        """Restrict the next votes to regions near ``(x, y)`` (``/initialpose``)."""
+        self.hint = (np.array([x, y], float), radius or self.config.hint_radius_m)
+        self.state, self.region = LOST, -1
+        self.tracker.reset()
+
+    # -- one frame ------------------------------------------------------------------------
+    def step(self, frame: Frame) -> Estimate:
+        """Process one frame; return the estimate (never raises on a frame's content)."""
+        start = time.perf_counter()
+        image = np.asarray(frame.image)
+        if image.ndim != 2 or image.dtype != np.uint8 or min(image.shape) < 16:
+            raise LocalizerError(f'a frame must be a grey uint8 image, got {image.dtype} '
+                                 f'{image.shape}')
+        event = ''
+        if self.last_stamp is not None and frame.stamp_ns < self.last_stamp:
+            self.reset()
+            event = 'reset'
+        self.last_stamp = frame.stamp_ns
+        self.stats.frames += 1
+        solution: PoseSolution | None = None
+        tracked = 0
+        if self.state == TRACKING:
+            solution, tracked, lost = self._track(image, frame)
+            if lost:
+                event = self._recover(image, frame)
+                if self.state == TRACKING:
+                    solution, tracked = self._last_solution, len(self.tracker.tracks)
+        else:
+            event = self._vote_global(image, frame) or event
+            if self.state == TRACKING:
+                solution, tracked = self._last_solution, len(self.tracker.tracks)
+        self.tracker.prev_image = image
+        return self._estimate(frame, solution, tracked, event, start)
+
+    # -- LOST: voting ---------------------------------------------------------------------
+    def _best_verified(self, image: np.ndarray, allowed: np.ndarray | None
+                       ) -> Verified | None:
+        features = extract_features(image, self.sift, self.detector)
+        self.stats.votes += 1
+        best: Verified | None = None
+        for candidate in vote(features, self.index, self.config, allowed):
+            found = verify(features, self.index.regions[candidate.region], self.index,
+                           self.config, self.rng)
+            if found is not None and (best is None or found.solution.inliers >
+                                      best.solution.inliers):
+                best = found
+        return best
+
+    def _start(self, found: Verified, frame: Frame) -> None:
+        self.state, self.region = TRACKING, found.region
+        self.tracker.set_region(self.index.regions[found.region])
+        self.tracker.tracks = Tracks(found.class_ids, found.uv.astype(np.float32))
+        self._last_solution = found.solution
+        self._failures = 0
+        self.camera_pose = found.solution.estimate.pose
+        self.predictor.reset()
+
+    def _allowed_by_hint(self) -> np.ndarray | None:
+        if self.hint is None:
+            return None
+        xy, radius = self.hint
+        poses = self.index.tree.query_ball_point(xy, r=radius)
+        if not poses:
+            poses = [self.index.nearest_pose(xy)[0]]
+        return np.unique(self.index.region_poses[:, poses].tocoo().row)
+
+    def _vote_global(self, image: np.ndarray, frame: Frame) -> str:
+        found = self._best_verified(image, self._allowed_by_hint())
+        if found is None:
+            return ''
+        self.hint = None
+        self._start(found, frame)
+        return 'vote'
+
+    def _recover(self, image: np.ndarray, frame: Frame) -> str:
+        """Vote among the neighbours, then globally, once the features are lost."""
+        previous = self.region
+        neighbours = np.append(self.index.region_graph[previous].indices, previous)
+        found = self._best_verified(image, neighbours)
+        event = 'neighbour_vote'
+        if found is None:
+            found = self._best_verified(image, None)
+            event = 'global_vote'
+        if found is None:
+            self.state, self.region, self.camera_pose = LOST, -1, None
+            self.tracker.reset()
+            self.stats.falls_to_lost += 1
+            return 'lost'
+        self._start(found, frame)
+        if found.region != previous:
+            self.stats.lost_switches += 1
+        return event
+
+    # -- TRACKING -------------------------------------------------------------------------
+    def _predicted_camera(self, frame: Frame) -> np.ndarray | None:
+        if self.camera_pose is None:
+            return None
+        v = self.predictor.velocity()
+        if v is None or self.last_pose_stamp is None:
+            return self.camera_pose
+        dt = (frame.stamp_ns - self.last_pose_stamp) / 1e9
+        return self.camera_pose + v * dt
+
+    last_pose_stamp: int | None = None
+    _last_solution: PoseSolution | None = None
+
+    def _track(self, image: np.ndarray, frame: Frame
+               ) -> tuple[PoseSolution | None, int, bool]:
+        config = self.config
+        region = self.index.regions[self.region]
+        tracks = self.tracker.track(image)
+        predicted = self._predicted_camera(frame)
+        tracks = tracks.subset(np.isin(tracks.class_ids, region.features))
+        if predicted is not None:
+            tracks = self._redetect(image, tracks, region, predicted)
+        if len(tracks) < config.min_tracked:
+            return None, len(tracks), True
+        solution = solve_pose(self.index, region, tracks.class_ids,
+                              tracks.uv.astype(float), config, self.rng)
+        if solution is not None and predicted is not None:
+            jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
+            if jump > config.max_jump_m:
+                solution = None
+        if solution is None:
+            self._failures += 1
+            self.tracker.tracks = tracks
+            return None, len(tracks), self._failures >= 2
+        self._failures = 0
+        keep = np.isin(tracks.class_ids, solution.inlier_classes)
+        tracks = tracks.subset(keep)
+        self.tracker.tracks = tracks
+        self.camera_pose = solution.estimate.pose
+        self._last_solution = solution
+        self._maybe_switch(frame, region.index)
+        return solution, len(tracks), False
+
+    def _redetect(self, image: np.ndarray, tracks: Tracks, region, predicted: np.ndarray
+                  ) -> Tracks:
+        """Search lost features where the pose predicts them; re-anchor a few tracks."""
+        config = self.config
+        missing = np.setdiff1d(region.features, tracks.class_ids)
+        if missing.size:
+            uv, ok = self.index.project(predicted, missing)
+            order = np.flatnonzero(ok)
+            order = order[self.rng.permutation(order.size)][:config.redetect_per_frame]
+            found = self.tracker.search(image, missing[order], uv[order],
+                                        config.redetect_radius_px)
+            tracks = tracks.merged(found)
+        refresh = self.tracker.refresh_candidates(tracks)
+        if refresh.size:
+            again = self.tracker.search(image, tracks.class_ids[refresh], tracks.uv[refresh],
+                                        2.0)
+            if len(again):
+                position = {int(c): i for i, c in enumerate(tracks.class_ids)}
+                for c, uv in zip(again.class_ids, again.uv, strict=True):
+                    tracks.uv[position[int(c)]] = uv
+        return tracks
+
+    def _maybe_switch(self, frame: Frame, region: int) -> None:
+        """Switch region before the features fade when the motion leads out (7.1)."""
+        if self.camera_pose is None:
+            return
+        current = base_pose(self.index, self.camera_pose)
+        ahead = self.predictor.predict(current, self.config.predict_horizon_s)
+        tracked = {}
+        ids = self.tracker.tracks.class_ids
+        for r in np.append(self.index.region_graph[region].indices, region):
+            tracked[int(r)] = int(np.isin(self.index.regions[r].features, ids).sum())
+        target = choose_region(self.index, region, current[:2], ahead[:2],
+                               self.config.border_margin, tracked)
+        if target is None:
+            return
+        new = self.index.regions[target]
+        self.tracker.set_region(new)
+        tracks = self.tracker.tracks
+        keep = tracks.subset(np.isin(tracks.class_ids, new.features))
+        self.tracker.tracks = self._redetect_all(frame, keep, new)
+        self.region = target
+        self.stats.predicted_switches += 1
+        self._switched = True
+
+    def _redetect_all(self, frame: Frame, tracks: Tracks, region) -> Tracks:
+        missing = np.setdiff1d(region.features, tracks.class_ids)
+        if missing.size == 0 or self.camera_pose is None:
+            return tracks
+        uv, ok = self.index.project(self.camera_pose, missing)
+        found = self.tracker.search(frame.image, missing[ok], uv[ok],
+                                    self.config.redetect_radius_px)
+        return tracks.merged(found)
+
+    _switched = False
+
+    # -- output ---------------------------------------------------------------------------
+    def _estimate(self, frame: Frame, solution: PoseSolution | None, tracked: int, event: str,
+                  start: float) -> Estimate:
+        if self._switched:
+            event = event or 'predicted_switch'
+            self._switched = False
+        pose = cov = camera = None
+        if solution is not None and self.state == TRACKING:
+            est = solution.estimate
+            cov_ok = np.all(np.isfinite(est.covariance)) and \
+                np.sqrt(max(est.covariance[0, 0], est.covariance[1, 1])) <= \
+                self.config.max_position_std_m
+            if cov_ok and np.all(np.isfinite(est.pose)):
+                camera = est.pose
+                pose = base_pose(self.index, camera)
+                cov = _carry_covariance(est.covariance, camera, self.index.camera_mount)
+                self.stats.poses += 1
+                self.last_pose_stamp = frame.stamp_ns
+                self.predictor.add(frame.stamp_ns, pose, frame.odom)
+        if event:
+            self.stats.events[event] = self.stats.events.get(event, 0) + 1
+        return Estimate(frame.stamp_ns, self.state, self.region if self.state == TRACKING
+                        else -1, pose, cov, camera, tracked, event,
+                        time.perf_counter() - start)
+
+
+def _carry_covariance(cov: np.ndarray, camera: np.ndarray, mount: np.ndarray) -> np.ndarray:
+    """Covariance of ``camera (+) mount^-1`` from the camera pose's covariance."""
+    t = invert_pose(mount)
+    c, s = np.cos(camera[2]), np.sin(camera[2])
+    jac = np.array([[1.0, 0.0, -s * t[0] - c * t[1]],
+                    [0.0, 1.0, c * t[0] - s * t[1]],
+                    [0.0, 0.0, 1.0]])
+    out = jac @ cov @ jac.T
+    return 0.5 * (out + out.T)
+

@@ -1,0 +1,120 @@
+"""Switching region by predicted motion, before the features fade (thesis 7.1).
+
+"Before a motion command is executed, the current location and direction of motion of
+the robot should be used to predict the position to which the robot will arrive ...
+If such a position is near the boundary of the current region or outside of it
+altogether, the robot should switch, before moving, to a region that contains both the
+current and the predicted new position ... If more than one region containing both
+positions exist, the one that spans most of the path that the robot will follow should
+be selected."
+
+:class:`MotionPredictor` predicts from odometry when there is some (the change of the
+``odom -> base_link`` pose over the last frames, rotated into ``map``), else from the
+history of estimated poses (constant velocity over the last half second).
+:func:`choose_region` applies the rule above on the sampled poses: "near the boundary"
+means a sampled pose outside the region within ``border_margin`` grid spacings of the
+predicted position; the path is sampled from the current position to twice the
+prediction, and each candidate scores the samples whose nearest pose it contains.
+"""
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from landmark_localizer.index import DatabaseIndex
+from visibility_builder.geometry.frames import compose_poses, invert_pose
+
+__all__ = ['MotionPredictor', 'choose_region']
+
+
+class MotionPredictor:
+    """Predicts the robot's position ahead of time.
+
+    Args:
+        history_s: Length of the pose history for the constant-velocity model.
+    """
+
+    def __init__(self, history_s: float = 0.5) -> None:
+        self.history_s = history_s
+        self.poses: deque[tuple[int, np.ndarray]] = deque()
+        self.odom: deque[tuple[int, np.ndarray]] = deque()
+
+    def reset(self) -> None:
+        """Forget the history (a jump in time or position)."""
+        self.poses.clear()
+        self.odom.clear()
+
+    def add(self, stamp_ns: int, pose: np.ndarray | None, odom: np.ndarray | None) -> None:
+        """Record the estimated base pose and the odometry pose of a frame."""
+        for queue, value in ((self.poses, pose), (self.odom, odom)):
+            if value is None or not np.all(np.isfinite(value)):
+                continue
+            queue.append((stamp_ns, np.asarray(value, float)))
+            while len(queue) > 2 and (stamp_ns - queue[0][0]) / 1e9 > self.history_s:
+                queue.popleft()
+
+    def velocity(self) -> np.ndarray | None:
+        """(vx, vy, vyaw) in ``map`` per second, or None without enough history."""
+        if len(self.odom) >= 2 and len(self.poses) >= 1:
+            (t0, a), (t1, b) = self.odom[0], self.odom[-1]
+            dt = (t1 - t0) / 1e9
+            if dt > 0:
+                delta = compose_poses(invert_pose(a), b)  # motion in the odom base frame
+                yaw = self.poses[-1][1][2]
+                c, s = np.cos(yaw - delta[2]), np.sin(yaw - delta[2])
+                return np.array([c * delta[0] - s * delta[1], s * delta[0] + c * delta[1],
+                                 delta[2]]) / dt
+        if len(self.poses) >= 2:
+            (t0, a), (t1, b) = self.poses[0], self.poses[-1]
+            dt = (t1 - t0) / 1e9
+            if dt > 0:
+                d = b - a
+                d[2] = (d[2] + np.pi) % (2 * np.pi) - np.pi
+                return d / dt
+        return None
+
+    def predict(self, pose: np.ndarray, horizon_s: float) -> np.ndarray:
+        """Return the base pose ``horizon_s`` ahead (the pose itself without a velocity)."""
+        v = self.velocity()
+        if v is None:
+            return np.asarray(pose, float)
+        return np.asarray(pose, float) + v * horizon_s
+
+
+def choose_region(index: DatabaseIndex, region: int, current_xy: np.ndarray,
+                  predicted_xy: np.ndarray, margin: float, tracked: dict[int, int]
+                  ) -> int | None:
+    """Return the region to switch to before moving, or None to stay (module docstring).
+
+    Args:
+        index: The database index.
+        region: The current region.
+        current_xy: The current position.
+        predicted_xy: The predicted position.
+        margin: "Near the border", in grid spacings.
+        tracked: Per region, how many of its features are tracked now (tie-breaker).
+    """
+    near = index.tree.query_ball_point(np.asarray(predicted_xy, float)[:2],
+                                       r=margin * index.spacing)
+    predicted_pose, _ = index.nearest_pose(predicted_xy)
+    near = np.union1d(np.asarray(near, np.int64), [predicted_pose])
+    if index.region_contains(region, near).all():
+        return None
+    current_pose, _ = index.nearest_pose(current_xy)
+    both = np.intersect1d(index.regions_of_pose(current_pose),
+                          index.regions_of_pose(predicted_pose))
+    both = both[both != region]
+    if both.size == 0:
+        return None
+    steps = np.linspace(0.0, 2.0, 9)[1:]
+    path = np.asarray(current_xy, float)[:2] + steps[:, None] * (
+        np.asarray(predicted_xy, float)[:2] - np.asarray(current_xy, float)[:2])
+    _, path_poses = index.tree.query(path)
+    scores = [(int(index.region_contains(r, path_poses).sum()), tracked.get(int(r), 0),
+               -int(r)) for r in both]
+    best = int(np.argmax([s[0] * 1000 + s[1] for s in scores]))
+    current_score = int(index.region_contains(region, path_poses).sum())
+    if scores[best][0] <= current_score and index.region_contains(region, [predicted_pose])[0]:
+        return None
+    return int(both[best])

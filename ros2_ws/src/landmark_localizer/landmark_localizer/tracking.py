@@ -1,0 +1,155 @@
+"""Following the region's features from frame to frame (thesis 3.1.4, 7.1).
+
+"While navigating inside a region, the corresponding k features are easily tracked
+between the images that the robot sees." :class:`Tracker` follows the current
+region's landmark and extra features:
+
+- pyramidal Lucas-Kanade from the previous frame, with a forward-backward check (a
+  track whose backward flow misses its start by more than ``lk_max_error_px`` is
+  dropped);
+- a lost feature is re-detected by descriptor in a window around its predicted pixel
+  (the class's point projected from the predicted pose): SIFT in the window, matched
+  to the class's descriptors (its representatives and its model-view descriptors);
+- a few tracked features per frame, in turn, are re-anchored the same way on the SIFT
+  keypoint under them, so Lucas-Kanade drift never accumulates for long (the model
+  views hold SIFT keypoint positions, so tracks should too).
+
+The work per frame depends on the number of region features (k plus the extras), not
+on the size of the database.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.index import DatabaseIndex, RegionData
+from landmark_localizer.matching import squared_distances
+
+__all__ = ['Tracker', 'Tracks']
+
+
+@dataclass
+class Tracks:
+    """Tracked features: class ids and their pixels in the latest frame.
+
+    Attributes:
+        class_ids: (t,) int64.
+        uv: (t, 2) float32 pixels.
+    """
+
+    class_ids: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
+
+    def __len__(self) -> int:
+        return int(self.class_ids.size)
+
+    def subset(self, keep: np.ndarray) -> Tracks:
+        """Return the tracks selected by a boolean mask or index array."""
+        return Tracks(self.class_ids[keep], self.uv[keep])
+
+    def merged(self, other: Tracks) -> Tracks:
+        """Return these tracks plus ``other``'s classes not tracked yet."""
+        new = ~np.isin(other.class_ids, self.class_ids)
+        return Tracks(np.concatenate([self.class_ids, other.class_ids[new]]),
+                      np.concatenate([self.uv, other.uv[new]]).astype(np.float32))
+
+
+class Tracker:
+    """Lucas-Kanade tracking plus re-detection by descriptor.
+
+    Args:
+        index: The database index (class descriptors, points, camera).
+        config: Tracking settings.
+        detector: An OpenCV SIFT detector with the database's settings.
+    """
+
+    def __init__(self, index: DatabaseIndex, config: LocalizerConfig, detector: object) -> None:
+        self.index = index
+        self.config = config
+        self.detector = detector
+        self.prev_image: np.ndarray | None = None
+        self.tracks = Tracks()
+        self._refresh_cursor = 0
+        self._reference: dict[int, np.ndarray] = {}
+        window = config.lk_window
+        self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,
+                        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+
+    def reset(self) -> None:
+        """Forget every track and the previous frame."""
+        self.prev_image = None
+        self.tracks = Tracks()
+
+    def set_region(self, region: RegionData) -> None:
+        """Prepare the reference descriptors of a region's classes (for re-detection)."""
+        index = self.index
+        for c in region.features:
+            c = int(c)
+            if c in self._reference:
+                continue
+            rows = [index.descriptors[index.descriptor_class == c]]
+            for view in region.views:
+                if c in view.position:
+                    rows.append(view.descriptors[view.position[c]][None, :])
+            self._reference[c] = np.concatenate(rows).astype(np.float32)
+
+    def track(self, gray: np.ndarray) -> Tracks:
+        """Move the tracks from the previous frame into this one (Lucas-Kanade)."""
+        tracks = self.tracks
+        if self.prev_image is None or len(tracks) == 0:
+            return Tracks()
+        prev, cur = self.prev_image, gray
+        p0 = tracks.uv.reshape(-1, 1, 2).astype(np.float32)
+        p1, status, _ = cv2.calcOpticalFlowPyrLK(prev, cur, p0, None, **self._lk)
+        back, status_back, _ = cv2.calcOpticalFlowPyrLK(cur, prev, p1, None, **self._lk)
+        error = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
+        h, w = cur.shape[:2]
+        uv = p1.reshape(-1, 2)
+        inside = (uv[:, 0] >= 0) & (uv[:, 0] < w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] < h - 1)
+        keep = (status.ravel() == 1) & (status_back.ravel() == 1) & \
+            (error < self.config.lk_max_error_px) & inside
+        return Tracks(tracks.class_ids[keep], uv[keep].astype(np.float32))
+
+    def search(self, gray: np.ndarray, class_ids: np.ndarray, predicted: np.ndarray,
+               radius: float) -> Tracks:
+        """Find classes near predicted pixels: SIFT in a window, matched by descriptor."""
+        found_ids, found_uv = [], []
+        h, w = gray.shape[:2]
+        r = int(round(radius)) + 8  # SIFT needs a margin around the keypoints it finds
+        for c, (u, v) in zip(class_ids, predicted, strict=True):
+            reference = self._reference.get(int(c))
+            if reference is None:
+                continue
+            x0, x1 = max(0, int(u) - r), min(w, int(u) + r + 1)
+            y0, y1 = max(0, int(v) - r), min(h, int(v) + r + 1)
+            if x1 - x0 < 16 or y1 - y0 < 16:
+                continue
+            keypoints, descriptors = self.detector.detectAndCompute(gray[y0:y1, x0:x1], None)
+            if not keypoints or descriptors is None:
+                continue
+            pts = np.array([k.pt for k in keypoints], np.float32) + np.array([x0, y0],
+                                                                            np.float32)
+            near = np.linalg.norm(pts - np.array([u, v], np.float32), axis=1) <= radius
+            if not near.any():
+                continue
+            d = np.sqrt(squared_distances(descriptors[near], reference).min(axis=1))
+            best = int(np.argmin(d))
+            if d[best] <= self.config.redetect_max_distance:
+                found_ids.append(int(c))
+                found_uv.append(pts[near][best])
+        if not found_ids:
+            return Tracks()
+        return Tracks(np.array(found_ids, np.int64), np.array(found_uv, np.float32))
+
+    def refresh_candidates(self, tracks: Tracks) -> np.ndarray:
+        """Return the indices of the tracks to re-anchor this frame (round robin)."""
+        n = len(tracks)
+        if n == 0 or self.config.refresh_per_frame == 0:
+            return np.zeros(0, np.int64)
+        count = min(n, self.config.refresh_per_frame)
+        start = self._refresh_cursor % n
+        self._refresh_cursor = start + count
+        return (start + np.arange(count)) % n

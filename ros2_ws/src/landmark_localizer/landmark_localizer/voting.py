@@ -1,0 +1,109 @@
+"""Finding the region from the current image: voting and geometric verification (7.1).
+
+"The features visible in the current image can vote for the regions they belong to,
+according to a membership relationship computed off-line. The region in which the
+robot is will be assumed to be one of those with at least k votes" (7.1, 3.1.4).
+
+:func:`vote`: every SIFT feature of the current image is matched to the class index
+(each class's representative descriptors; Lowe's ratio against the nearest *other*
+class); each matched class votes for the regions it belongs to (landmark or extra);
+candidates need ``vote_min_votes`` votes (default: the database's k).
+
+:func:`verify`: a candidate is checked geometrically: the image's features are matched
+to each of the region's model views with the symmetry check the thesis suggests
+(6.2.1: a match must also hold matched back from the model view), the motion to each
+view is solved (:func:`visibility_builder.geometry.two_view.relative_motion`) and the
+rays intersected (:func:`~visibility_builder.geometry.localize.position_from_views`);
+a candidate passes with enough inliers per view, a bounded residual and rays that
+meet in front of the views. The best candidate (most inliers) wins.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.index import DatabaseIndex, RegionData
+from landmark_localizer.matching import grouped_nearest, mutual_matches, squared_distances
+from landmark_localizer.pose import PoseSolution, solve_pose
+from visibility_builder.features import ImageFeatures
+
+__all__ = ['Candidate', 'Verified', 'verify', 'vote']
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A region with enough votes.
+
+    Attributes:
+        region: Region index.
+        votes: Distinct matched classes of the region.
+    """
+
+    region: int
+    votes: int
+
+
+@dataclass(frozen=True)
+class Verified:
+    """A candidate that passed the geometric check.
+
+    Attributes:
+        region: Region index.
+        solution: The pose solve against its model views.
+        class_ids: (t,) classes matched in the current image (the tracks to start).
+        uv: (t, 2) their pixels in the current image.
+    """
+
+    region: int
+    solution: PoseSolution
+    class_ids: np.ndarray
+    uv: np.ndarray
+
+
+def vote(features: ImageFeatures, index: DatabaseIndex, config: LocalizerConfig,
+         allowed: np.ndarray | None = None) -> list[Candidate]:
+    """Return the candidate regions, most votes first (at most ``vote_candidates``).
+
+    Args:
+        features: The current image's SIFT features.
+        index: The database index.
+        config: Voting settings.
+        allowed: Region indices to consider (None: all).
+    """
+    if len(features) == 0:
+        return []
+    d2 = squared_distances(features.descriptors, index.descriptors, index.descriptor_norms)
+    best, d1, d_other = grouped_nearest(d2, index.descriptor_class, index.n_classes)
+    good = (d1 <= config.vote_max_distance) & (d1 < config.vote_ratio * d_other)
+    matched = np.zeros(index.n_classes, np.float64)
+    matched[np.unique(best[good])] = 1.0
+    votes = np.asarray(index.membership.T @ matched).ravel().astype(int)
+    need = config.vote_min_votes or index.k
+    regions = np.flatnonzero(votes >= need)
+    if allowed is not None:
+        regions = np.intersect1d(regions, allowed)
+    order = np.lexsort((regions, -votes[regions]))
+    return [Candidate(int(r), int(votes[r])) for r in regions[order][:config.vote_candidates]]
+
+
+def verify(features: ImageFeatures, region: RegionData, index: DatabaseIndex,
+           config: LocalizerConfig, rng: np.random.Generator) -> Verified | None:
+    """Check a candidate region geometrically; None when it fails."""
+    query = features.descriptors.astype(np.float32)
+    matched_uv: dict[int, np.ndarray] = {}
+    for view in region.views:
+        pairs = mutual_matches(query, view.descriptors, config.verify_ratio,
+                               config.vote_max_distance)
+        for i, j in pairs:
+            matched_uv.setdefault(int(view.class_ids[j]), features.keypoints[i])
+    if len(matched_uv) < config.min_inliers:
+        return None
+    class_ids = np.fromiter(matched_uv, np.int64, len(matched_uv))
+    uv = np.array([matched_uv[int(c)] for c in class_ids], float)
+    solution = solve_pose(index, region, class_ids, uv, config, rng)
+    if solution is None:
+        return None
+    keep = np.isin(class_ids, solution.inlier_classes)
+    return Verified(region.index, solution, class_ids[keep], uv[keep])
