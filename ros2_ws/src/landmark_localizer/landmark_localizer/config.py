@@ -45,8 +45,8 @@ class LocalizerConfig:
             outside the region counts as near its border.
         max_jump_m: a pose further than this from the prediction is distrusted:
             the robot may have been kidnapped, so it votes again.
-        third_view_min_angle_deg: below this angle between the rays of two model views,
-            a third view of the region is used where it exists.
+        max_heading_disagreement_deg: a model view whose implied heading of the
+            current camera differs from the other views' by more than this is dropped.
         max_position_std_m: poses with a larger position standard deviation are not
             published.
         hint_radius_m: /initialpose restricts voting to regions with a pose this close.
@@ -72,7 +72,7 @@ class LocalizerConfig:
     predict_horizon_s: float = 0.6
     border_margin: float = 1.0
     max_jump_m: float = 0.75
-    third_view_min_angle_deg: float = 15.0
+    max_heading_disagreement_deg: float = 3.0
     max_position_std_m: float = 0.5
     hint_radius_m: float = 1.5
     seed: int = 0

@@ -28,7 +28,7 @@ from landmark_db.database import LandmarkDatabase
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
-from landmark_localizer.pose import PoseSolution, base_pose, solve_pose
+from landmark_localizer.pose import PoseSolution, base_pose, refine_pose, solve_pose
 from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
@@ -260,8 +260,13 @@ class Localizer:
             tracks = self._redetect(image, tracks, region, predicted)
         if len(tracks) < config.min_tracked:
             return None, len(tracks), True
-        solution = solve_pose(self.index, region, tracks.class_ids,
-                              tracks.uv.astype(float), config, self.rng)
+        solution = None
+        if predicted is not None:
+            solution = refine_pose(self.index, region, tracks.class_ids,
+                                   tracks.uv.astype(float), predicted, config)
+        if solution is None:
+            solution = solve_pose(self.index, region, tracks.class_ids,
+                                  tracks.uv.astype(float), config, self.rng, predicted)
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
             if jump > config.max_jump_m:

@@ -19,11 +19,16 @@ import numpy as np
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.frames import compose_poses, invert_pose
+from visibility_builder.geometry.frames import compose_poses, invert_pose, wrap_angle
 from visibility_builder.geometry.localize import PoseEstimate, position_from_views
-from visibility_builder.geometry.two_view import RelativeMotion, TwoViewConfig, relative_motion
+from visibility_builder.geometry.two_view import (
+    RelativeMotion,
+    TwoViewConfig,
+    planar_epipolar_residuals,
+    relative_motion,
+)
 
-__all__ = ['PoseSolution', 'base_pose', 'solve_pose']
+__all__ = ['PoseSolution', 'base_pose', 'refine_pose', 'solve_pose']
 
 
 @dataclass(frozen=True)
@@ -51,8 +56,15 @@ def _focal(index: DatabaseIndex) -> float:
 
 def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
                uv: np.ndarray, config: LocalizerConfig, rng: np.random.Generator,
-               ) -> PoseSolution | None:
+               predicted: np.ndarray | None = None) -> PoseSolution | None:
     """Solve the current camera pose from tracked features against the model views.
+
+    Every view's motion also gives the current camera's heading (the view's yaw plus
+    the motion's rotation), and all views see the same camera: a view whose heading
+    disagrees with the others' (their circular median; with two views, each other) by
+    more than ``max_heading_disagreement_deg`` found a
+    wrong motion (few points on one wall can fit a second solution) and is dropped
+    before the rays are intersected.
 
     Args:
         index: The database index (camera model, focal length).
@@ -61,6 +73,7 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         uv: (t, 2) their pixels in the current image.
         config: ``min_inliers``, ``max_residual_px``, ``method``.
         rng: Random generator of the robust solvers.
+        predicted: (3,) the predicted camera pose, if any (tie-breaker of the headings).
 
     Returns:
         The solution, or None when fewer than two views give a trustworthy motion.
@@ -93,6 +106,16 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         worst = max(worst, residual_px)
     if len(motions) < 2:
         return None
+    keep = _consistent_headings(np.array(poses), motions, predicted,
+                                math.radians(config.max_heading_disagreement_deg))
+    if keep.sum() < 2:
+        return None
+    for k in np.flatnonzero(~keep):
+        outliers.update(int(c) for c in kept[k])
+    poses = [p for p, ok in zip(poses, keep, strict=True) if ok]
+    motions = [m for m, ok in zip(motions, keep, strict=True) if ok]
+    kept = [c for c, ok in zip(kept, keep, strict=True) if ok]
+    total = int(sum(int(m.inliers.sum()) for m in motions))
     try:
         estimate = position_from_views(np.array(poses), motions,
                                        min_ray_angle=math.radians(0.5))
@@ -105,6 +128,145 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     return PoseSolution(estimate, inliers, len(motions), total, worst)
 
 
+def _consistent_headings(poses: np.ndarray, motions: list[RelativeMotion],
+                         predicted: np.ndarray | None, limit: float) -> np.ndarray:
+    """(k,) bool: the views whose implied heading agrees with the consensus.
+
+    Three or more views: within ``limit`` of their circular median. Two views: both
+    when they agree with each other, else the one nearer the predicted heading alone
+    (which leaves too few views to solve).
+    """
+    headings = np.array([p[2] + m.theta for p, m in zip(poses, motions, strict=True)])
+    if len(headings) >= 3:
+        return np.abs(wrap_angle(headings - _circular_median(headings))) <= limit
+    if abs(float(wrap_angle(headings[0] - headings[1]))) <= limit:
+        return np.ones(2, bool)
+    keep = np.zeros(2, bool)
+    if predicted is not None:
+        keep[int(np.argmin(np.abs(wrap_angle(headings - predicted[2]))))] = True
+    return keep
+
+
+def _circular_median(angles: np.ndarray) -> float:
+    """Return the input angle with the least summed absolute deviation from the others."""
+    cost = np.abs(wrap_angle(angles[:, None] - angles[None, :])).sum(axis=1)
+    return float(angles[int(np.argmin(cost))])
+
+
 def base_pose(index: DatabaseIndex, camera_pose: np.ndarray) -> np.ndarray:
     """``base_link`` pose in ``map`` from the camera pose, through the camera mount."""
     return compose_poses(camera_pose, invert_pose(index.camera_mount))
+
+
+@dataclass(frozen=True)
+class _ViewRays:
+    """One model view's correspondences as rays (for the joint refinement)."""
+
+    pose: np.ndarray
+    classes: np.ndarray
+    rays_model: np.ndarray
+    rays_current: np.ndarray
+
+
+def _view_rays(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
+               uv: np.ndarray, min_points: int) -> list[_ViewRays]:
+    out = []
+    rays_current = index.camera.unproject(uv)
+    for view in region.views:
+        rows = np.array([view.position.get(int(c), -1) for c in class_ids])
+        have = rows >= 0
+        if have.sum() >= min_points:
+            out.append(_ViewRays(view.pose, class_ids[have],
+                                 index.camera.unproject(view.keypoints[rows[have]]),
+                                 rays_current[have]))
+    return out
+
+
+def _residuals(pose: np.ndarray, views: list[_ViewRays]) -> np.ndarray:
+    parts = []
+    for view in views:
+        rel = compose_poses(invert_pose(view.pose), pose)
+        parts.append(planar_epipolar_residuals(view.rays_model, view.rays_current,
+                                               float(rel[2]), math.atan2(rel[1], rel[0])))
+    return np.concatenate(parts)
+
+
+def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
+                uv: np.ndarray, initial: np.ndarray, config: LocalizerConfig,
+                iterations: int = 8) -> PoseSolution | None:
+    """Polish the camera pose on the epipolar errors of every model view at once.
+
+    The per-view solve of Section 7.5 followed by the intersection of 7.4 treats each
+    view alone; given a starting pose (the prediction while tracking, or the
+    intersection after a vote), the pose ``(x, y, yaw)`` itself is the unknown here:
+    it fixes each view's rotation and translation direction, and Gauss-Newton with
+    Huber weights minimises the Sampson errors of all views' correspondences together.
+    Near the horizon the panoramic planar constraint is weak and a second, wrong
+    motion can fit a single view's points as well as the true one (measured on the
+    room run: 22 of 27 points within 0.1 px at 20 degrees off); starting from the
+    prediction picks the right one. The covariance is ``s^2 (J^T W J)^-1`` with the
+    weighted residuals' variance ``s^2`` (floored at 0.1 px): large along the line
+    through two views when the robot stands on it.
+
+    Returns:
+        The solution, or None when fewer than two views have ``min_inliers`` inliers,
+        the step diverges, or the residual exceeds ``max_residual_px``.
+    """
+    focal = _focal(index)
+    views = _view_rays(index, region, class_ids, uv, config.min_inliers)
+    if len(views) < 2:
+        return None
+    threshold = max(1.0, 0.75 * config.max_residual_px) / focal
+    pose = np.asarray(initial, float).copy()
+    step = np.array([1e-4, 1e-4, 1e-5])
+    for _ in range(iterations):
+        r = _residuals(pose, views)
+        weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
+        jac = np.empty((r.size, 3))
+        for j in range(3):
+            probe = pose.copy()
+            probe[j] += step[j]
+            jac[:, j] = (_residuals(probe, views) - r) / step[j]
+        jw = jac * weights[:, None]
+        try:
+            delta = np.linalg.solve(jw.T @ jac + 1e-12 * np.eye(3), -(jw.T @ r))
+        except np.linalg.LinAlgError:
+            return None
+        pose = pose + delta
+        pose[2] = float(wrap_angle(pose[2]))
+        if np.abs(delta[:2]).max() < 1e-5 and abs(delta[2]) < 1e-6:
+            break
+    r = _residuals(pose, views)
+    inlier = np.abs(r) <= 2.0 * threshold
+    sizes = np.cumsum([0] + [len(v.classes) for v in views])
+    per_view = [int(inlier[a:b].sum()) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
+    if sum(n >= config.min_inliers for n in per_view) < 2:
+        return None
+    rms_px = float(np.sqrt(np.mean(r[inlier] ** 2)) * focal)
+    if not rms_px <= config.max_residual_px:
+        return None
+    jac = np.empty((int(inlier.sum()), 3))
+    for j in range(3):
+        probe = pose.copy()
+        probe[j] += step[j]
+        jac[:, j] = (_residuals(probe, views)[inlier] - r[inlier]) / step[j]
+    sigma2 = max(float(np.mean(r[inlier] ** 2)), (0.1 / focal) ** 2)
+    try:
+        cov = sigma2 * np.linalg.inv(jac.T @ jac)
+    except np.linalg.LinAlgError:
+        return None
+    classes = np.concatenate([v.classes for v in views])
+    bad = np.unique(classes[~inlier])
+    good = np.setdiff1d(np.unique(classes[inlier]), bad)
+    angle = _ray_angle(pose, [v.pose for v in views])
+    estimate = PoseEstimate(float(pose[0]), float(pose[1]), float(pose[2]), 0.5 * (cov + cov.T),
+                            angle, rms_px / focal, len(views), True)
+    return PoseSolution(estimate, good, len(views), int(inlier.sum()), rms_px)
+
+
+def _ray_angle(pose: np.ndarray, view_poses: list[np.ndarray]) -> float:
+    """Largest angle between the directions from the views to the pose, in [0, pi/2]."""
+    d = np.array([pose[:2] - p[:2] for p in view_poses])
+    d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
+    cosines = np.clip(np.abs(d @ d.T), 0.0, 1.0)
+    return float(np.arccos(cosines.min()))
