@@ -37,6 +37,10 @@ class LocalizerConfig:
         redetect_radius_px: half-size of the window searched around a feature's
             predicted position when its track is lost.
         redetect_per_frame: at most this many lost features searched per frame.
+        redetect_cooldown: a feature searched in vain is not searched again for this
+            many frames.
+        switch_redetect: at most this many of the new region's features searched at a
+            switch.
         refresh_per_frame: tracked features re-anchored on a SIFT keypoint per frame
             (round robin; bounds Lucas-Kanade drift).
         redetect_max_distance: largest SIFT distance of a re-detected feature.
@@ -66,8 +70,10 @@ class LocalizerConfig:
     lk_levels: int = 3
     lk_max_error_px: float = 1.0
     redetect_radius_px: float = 12.0
-    redetect_per_frame: int = 8
-    refresh_per_frame: int = 4
+    redetect_per_frame: int = 3
+    redetect_cooldown: int = 10
+    switch_redetect: int = 12
+    refresh_per_frame: int = 2
     redetect_max_distance: float = 280.0
     predict_horizon_s: float = 0.6
     border_margin: float = 1.0

@@ -162,6 +162,7 @@ class Localizer:
             event = 'reset'
         self.last_stamp = frame.stamp_ns
         self.stats.frames += 1
+        self.tracker.next_frame()
         solution: PoseSolution | None = None
         tracked = 0
         if self.state == TRACKING:
@@ -289,6 +290,7 @@ class Localizer:
         """Search lost features where the pose predicts them; re-anchor a few tracks."""
         config = self.config
         missing = np.setdiff1d(region.features, tracks.class_ids)
+        missing = missing[~self.tracker.cooling(missing)]
         if missing.size:
             uv, ok = self.index.project(predicted, missing)
             order = np.flatnonzero(ok)
@@ -299,7 +301,7 @@ class Localizer:
         refresh = self.tracker.refresh_candidates(tracks)
         if refresh.size:
             again = self.tracker.search(image, tracks.class_ids[refresh], tracks.uv[refresh],
-                                        2.0)
+                                        2.0, remember=False)
             if len(again):
                 position = {int(c): i for i, c in enumerate(tracks.class_ids)}
                 for c, uv in zip(again.class_ids, again.uv, strict=True):
@@ -334,7 +336,11 @@ class Localizer:
         if missing.size == 0 or self.camera_pose is None:
             return tracks
         uv, ok = self.index.project(self.camera_pose, missing)
-        found = self.tracker.search(frame.image, missing[ok], uv[ok],
+        # Landmark features first: they are the ones every pose of the region sees.
+        order = np.flatnonzero(ok)
+        order = order[np.argsort(~np.isin(missing[order], region.landmark), kind='stable')]
+        order = order[:self.config.switch_redetect]
+        found = self.tracker.search(frame.image, missing[order], uv[order],
                                     self.config.redetect_radius_px)
         return tracks.merged(found)
 

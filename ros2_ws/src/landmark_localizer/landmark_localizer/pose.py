@@ -24,7 +24,7 @@ from visibility_builder.geometry.localize import PoseEstimate, position_from_vie
 from visibility_builder.geometry.two_view import (
     RelativeMotion,
     TwoViewConfig,
-    planar_epipolar_residuals,
+    pointwise_planar_residuals,
     relative_motion,
 )
 
@@ -159,36 +159,53 @@ def base_pose(index: DatabaseIndex, camera_pose: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class _ViewRays:
-    """One model view's correspondences as rays (for the joint refinement)."""
+class _Correspondences:
+    """Every model view's correspondences stacked, for the joint refinement.
 
-    pose: np.ndarray
+    Attributes:
+        view_poses: (V, 3) camera poses of the views.
+        view: (n,) the view of each correspondence.
+        classes: (n,) its class.
+        rays_model: (n, 3) rays in its model view.
+        rays_current: (n, 3) rays in the current view.
+    """
+
+    view_poses: np.ndarray
+    view: np.ndarray
     classes: np.ndarray
     rays_model: np.ndarray
     rays_current: np.ndarray
 
 
-def _view_rays(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
-               uv: np.ndarray, min_points: int) -> list[_ViewRays]:
-    out = []
+def _correspondences(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
+                     uv: np.ndarray, min_points: int) -> _Correspondences | None:
     rays_current = index.camera.unproject(uv)
-    for view in region.views:
-        rows = np.array([view.position.get(int(c), -1) for c in class_ids])
+    poses, view, classes, model, current = [], [], [], [], []
+    for v in region.views:
+        rows = np.array([v.position.get(int(c), -1) for c in class_ids])
         have = rows >= 0
-        if have.sum() >= min_points:
-            out.append(_ViewRays(view.pose, class_ids[have],
-                                 index.camera.unproject(view.keypoints[rows[have]]),
-                                 rays_current[have]))
-    return out
+        if have.sum() < min_points:
+            continue
+        view.append(np.full(int(have.sum()), len(poses)))
+        poses.append(v.pose)
+        classes.append(class_ids[have])
+        model.append(index.camera.unproject(v.keypoints[rows[have]]))
+        current.append(rays_current[have])
+    if len(poses) < 2:
+        return None
+    return _Correspondences(np.array(poses), np.concatenate(view), np.concatenate(classes),
+                            np.concatenate(model), np.concatenate(current))
 
 
-def _residuals(pose: np.ndarray, views: list[_ViewRays]) -> np.ndarray:
-    parts = []
-    for view in views:
-        rel = compose_poses(invert_pose(view.pose), pose)
-        parts.append(planar_epipolar_residuals(view.rays_model, view.rays_current,
-                                               float(rel[2]), math.atan2(rel[1], rel[0])))
-    return np.concatenate(parts)
+def _residuals(pose: np.ndarray, data: _Correspondences) -> np.ndarray:
+    """Sampson errors of every correspondence with the camera at ``pose``."""
+    vp = data.view_poses
+    dx, dy = pose[0] - vp[:, 0], pose[1] - vp[:, 1]
+    c, s = np.cos(vp[:, 2]), np.sin(vp[:, 2])
+    theta = wrap_angle(pose[2] - vp[:, 2])
+    phi = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
+    return pointwise_planar_residuals(data.rays_model, data.rays_current,
+                                      theta[data.view], phi[data.view])
 
 
 def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
@@ -213,20 +230,19 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         the step diverges, or the residual exceeds ``max_residual_px``.
     """
     focal = _focal(index)
-    views = _view_rays(index, region, class_ids, uv, config.min_inliers)
-    if len(views) < 2:
+    data = _correspondences(index, region, class_ids, uv, config.min_inliers)
+    if data is None:
         return None
     threshold = max(1.0, 0.75 * config.max_residual_px) / focal
     pose = np.asarray(initial, float).copy()
     step = np.array([1e-4, 1e-4, 1e-5])
+    probes = pose + np.diag(step)
     for _ in range(iterations):
-        r = _residuals(pose, views)
+        r = _residuals(pose, data)
         weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
-        jac = np.empty((r.size, 3))
-        for j in range(3):
-            probe = pose.copy()
-            probe[j] += step[j]
-            jac[:, j] = (_residuals(probe, views) - r) / step[j]
+        probes = pose + np.diag(step)
+        jac = np.stack([(_residuals(p, data) - r) / h for p, h in zip(probes, step,
+                                                                      strict=True)], axis=1)
         jw = jac * weights[:, None]
         try:
             delta = np.linalg.solve(jw.T @ jac + 1e-12 * np.eye(3), -(jw.T @ r))
@@ -236,32 +252,28 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         pose[2] = float(wrap_angle(pose[2]))
         if np.abs(delta[:2]).max() < 1e-5 and abs(delta[2]) < 1e-6:
             break
-    r = _residuals(pose, views)
+    r = _residuals(pose, data)
     inlier = np.abs(r) <= 2.0 * threshold
-    sizes = np.cumsum([0] + [len(v.classes) for v in views])
-    per_view = [int(inlier[a:b].sum()) for a, b in zip(sizes[:-1], sizes[1:], strict=True)]
-    if sum(n >= config.min_inliers for n in per_view) < 2:
+    per_view = np.bincount(data.view[inlier], minlength=len(data.view_poses))
+    if int((per_view >= config.min_inliers).sum()) < 2:
         return None
     rms_px = float(np.sqrt(np.mean(r[inlier] ** 2)) * focal)
     if not rms_px <= config.max_residual_px:
         return None
-    jac = np.empty((int(inlier.sum()), 3))
-    for j in range(3):
-        probe = pose.copy()
-        probe[j] += step[j]
-        jac[:, j] = (_residuals(probe, views)[inlier] - r[inlier]) / step[j]
+    probes = pose + np.diag(step)
+    jac = np.stack([(_residuals(p, data)[inlier] - r[inlier]) / h
+                    for p, h in zip(probes, step, strict=True)], axis=1)
     sigma2 = max(float(np.mean(r[inlier] ** 2)), (0.1 / focal) ** 2)
     try:
         cov = sigma2 * np.linalg.inv(jac.T @ jac)
     except np.linalg.LinAlgError:
         return None
-    classes = np.concatenate([v.classes for v in views])
-    bad = np.unique(classes[~inlier])
-    good = np.setdiff1d(np.unique(classes[inlier]), bad)
-    angle = _ray_angle(pose, [v.pose for v in views])
+    bad = np.unique(data.classes[~inlier])
+    good = np.setdiff1d(np.unique(data.classes[inlier]), bad)
+    angle = _ray_angle(pose, list(data.view_poses))
     estimate = PoseEstimate(float(pose[0]), float(pose[1]), float(pose[2]), 0.5 * (cov + cov.T),
-                            angle, rms_px / focal, len(views), True)
-    return PoseSolution(estimate, good, len(views), int(inlier.sum()), rms_px)
+                            angle, rms_px / focal, len(data.view_poses), True)
+    return PoseSolution(estimate, good, len(data.view_poses), int(inlier.sum()), rms_px)
 
 
 def _ray_angle(pose: np.ndarray, view_poses: list[np.ndarray]) -> float:

@@ -73,6 +73,8 @@ class Tracker:
         self.prev_image: np.ndarray | None = None
         self.tracks = Tracks()
         self._refresh_cursor = 0
+        self._frame = 0
+        self._searched: dict[int, int] = {}  # class -> frame of its last failed search
         self._reference: dict[int, np.ndarray] = {}
         window = config.lk_window
         self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,
@@ -113,9 +115,23 @@ class Tracker:
             (error < self.config.lk_max_error_px) & inside
         return Tracks(tracks.class_ids[keep], uv[keep].astype(np.float32))
 
+    def next_frame(self) -> None:
+        """Count a frame (for the re-detection cool-down)."""
+        self._frame += 1
+
+    def cooling(self, class_ids: np.ndarray) -> np.ndarray:
+        """(n,) bool: classes searched in vain within the last ``redetect_cooldown`` frames."""
+        limit = self._frame - self.config.redetect_cooldown
+        return np.array([self._searched.get(int(c), -10**9) > limit for c in class_ids], bool)
+
     def search(self, gray: np.ndarray, class_ids: np.ndarray, predicted: np.ndarray,
-               radius: float) -> Tracks:
-        """Find classes near predicted pixels: SIFT in a window, matched by descriptor."""
+               radius: float, remember: bool = True) -> Tracks:
+        """Find classes near predicted pixels: SIFT in a window, matched by descriptor.
+
+        A class not found is not searched again for ``redetect_cooldown`` frames
+        (``remember``): a feature hidden behind an obstacle stays hidden for a while,
+        and each window costs a SIFT run.
+        """
         found_ids, found_uv = [], []
         h, w = gray.shape[:2]
         r = int(round(radius)) + 8  # SIFT needs a margin around the keypoints it finds
@@ -140,6 +156,11 @@ class Tracker:
             if d[best] <= self.config.redetect_max_distance:
                 found_ids.append(int(c))
                 found_uv.append(pts[near][best])
+        if remember:
+            found = set(found_ids)
+            for c in class_ids:
+                if int(c) not in found:
+                    self._searched[int(c)] = self._frame
         if not found_ids:
             return Tracks()
         return Tracks(np.array(found_ids, np.int64), np.array(found_uv, np.float32))

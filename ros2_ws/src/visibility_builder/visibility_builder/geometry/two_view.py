@@ -67,6 +67,7 @@ __all__ = [
     'panoramic_planar_motion',
     'pinhole_planar_essential',
     'planar_epipolar_residuals',
+    'pointwise_planar_residuals',
     'relative_motion',
 ]
 
@@ -277,6 +278,35 @@ def planar_epipolar_residuals(rays_model: np.ndarray, rays_current: np.ndarray,
     """
     return _sampson(_essential(theta, phi), np.asarray(rays_model, dtype=float),
                     np.asarray(rays_current, dtype=float))
+
+
+def pointwise_planar_residuals(rays_model: np.ndarray, rays_current: np.ndarray,
+                               theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Return Sampson angular errors, correspondence ``i`` under its own planar motion.
+
+    Like :func:`planar_epipolar_residuals`, but ``theta`` and ``phi`` are ``(n,)``:
+    each correspondence may belong to another model view (one motion per view,
+    repeated for its correspondences), so that the errors of several views come from
+    one vectorised pass (the localizer refines a pose on all its views at once).
+
+    Args:
+        rays_model: ``(n, 3)`` unit rays of each correspondence's model view.
+        rays_current: ``(n, 3)`` unit rays of the current view.
+        theta: ``(n,)`` relative yaw of each correspondence's motion, radians.
+        phi: ``(n,)`` bearing of each correspondence's motion, radians.
+
+    Returns:
+        ``(n,)`` signed errors, radians.
+    """
+    f1 = np.asarray(rays_model, dtype=float)
+    f2 = np.asarray(rays_current, dtype=float)
+    E = _essentials(np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
+    e_f1 = np.einsum('nij,nj->ni', E, f1)
+    et_f2 = np.einsum('nji,nj->ni', E, f2)
+    algebraic = np.einsum('ni,ni->n', f2, e_f1)
+    a2 = algebraic * algebraic
+    denom2 = np.einsum('ni,ni->n', e_f1, e_f1) + np.einsum('ni,ni->n', et_f2, et_f2) - 2.0 * a2
+    return algebraic / np.sqrt(np.maximum(denom2, 1e-300))
 
 
 def _triangulate_depths(R: np.ndarray, T: np.ndarray, f_model: np.ndarray,
