@@ -21,7 +21,11 @@ setup(
     description='Runtime view-based localizer over the landmark database.',
     license='Apache-2.0',
     entry_points={
-        'console_scripts': [],
-        'vbn.commands': [],
+        'console_scripts': [
+            'localizer = landmark_localizer.node:main',
+        ],
+        'vbn.commands': [
+            'localize = landmark_localizer.cli.localize:register',
+        ],
     },
 )

@@ -1,0 +1,161 @@
+"""``vbn localize --db DB BAGDIR --out POSES_BAGDIR``: the localizer core over a bag, offline.
+
+Example::
+
+    vbn localize --db out/room.db bags/room_run --out out/room_run_poses
+    evo_ape bag2 out/room_run_poses /ground_truth/pose /localizer/pose
+
+Runs :class:`~landmark_localizer.localizer.Localizer` on every image of the bag as fast
+as it can (odometry from ``/odom`` interpolated at each image's stamp), writes
+``/localizer/pose``, ``/localizer/pose_with_covariance``, ``/localizer/region`` and a
+copy of ``/ground_truth/pose`` into a bag that ``evo_ape bag2`` reads, and prints the
+run's figures: frames, poses, availability, region changes by prediction and after a
+loss, latency (decoding included) and, with ground truth, the accuracy computed here
+and by evo from the written bag. ``--one-core`` measures latency as the issue asks:
+BLAS and OpenCV on one thread, the process pinned to one CPU.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+import sys
+from typing import Any
+
+__all__ = ['register', 'run', 'use_one_core']
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``localize`` subcommand."""
+    parser = subparsers.add_parser(
+        'localize', help='run the localizer over a bag offline and evaluate it',
+        description='Localize every image of a run bag against a landmark database (the '
+                    'same core as the localizer node, as fast as it can), write the poses '
+                    'and a copy of the ground truth into a bag evo_ape bag2 reads, and '
+                    'print availability, switching, latency and accuracy.')
+    parser.add_argument('bag', metavar='BAGDIR', help='run bag directory (or .mcap)')
+    parser.add_argument('--db', required=True, metavar='DB', help='landmark database')
+    parser.add_argument('--out', required=True, metavar='POSES_BAGDIR',
+                        help='pose bag to write (must not exist unless --overwrite)')
+    parser.add_argument('--overwrite', action='store_true', help='replace --out if it exists')
+    parser.add_argument('--set', dest='settings', action='append', default=[],
+                        metavar='NAME=VALUE',
+                        help='a localizer setting by its parameter name, e.g. min_tracked=6 '
+                             '(repeatable; names as in config/localizer.yaml)')
+    parser.add_argument('--limit', type=int, default=None, metavar='N',
+                        help='localize only the first N images')
+    parser.add_argument('--image-topic', default=None,
+                        help='image topic (default /camera/image_raw, else .../compressed)')
+    parser.add_argument('--one-core', action='store_true',
+                        help='one BLAS and OpenCV thread, pinned to one CPU (latency figures)')
+    parser.add_argument('--no-evo', action='store_true', help='skip the check by evo_ape')
+    parser.add_argument('--json', metavar='FILE', default=None,
+                        help='write the figures as JSON into FILE')
+    parser.add_argument('--quiet', action='store_true', help='no progress line')
+    parser.set_defaults(func=run)
+
+
+def use_one_core() -> str:
+    """One BLAS and OpenCV thread, and this process pinned to one CPU where possible.
+
+    OpenBLAS reads its thread count when numpy is first imported: set
+    ``OPENBLAS_NUM_THREADS=1`` in the environment of a process that has imported numpy
+    already (``vbn bench-localize`` does for its children).
+
+    Returns:
+        What was done, for the summary.
+    """
+    for name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+        os.environ.setdefault(name, '1')
+    import cv2
+
+    cv2.setNumThreads(1)
+    done = [f'OPENBLAS_NUM_THREADS={os.environ["OPENBLAS_NUM_THREADS"]}',
+            'cv2.setNumThreads(1)']
+    if hasattr(os, 'sched_setaffinity'):
+        cpus = sorted(os.sched_getaffinity(0))
+        os.sched_setaffinity(0, {cpus[-1]})
+        done.append(f'pinned to CPU {cpus[-1]}')
+    return ', '.join(done)
+
+
+def parse_settings(items: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` items as a dict (values parsed as YAML scalars)."""
+    import yaml
+
+    from landmark_localizer.errors import LocalizerError
+
+    values: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition('=')
+        if not sep or not name.strip():
+            raise LocalizerError(f'--set wants NAME=VALUE, got {item!r}')
+        try:
+            values[name.strip()] = yaml.safe_load(text.strip())
+        except yaml.YAMLError:
+            values[name.strip()] = text.strip()
+    return values
+
+
+def _progress(quiet: bool):  # noqa: ANN202 - a small closure
+    if quiet or not sys.stderr.isatty():
+        return None
+
+    def show(done: int, total: int) -> None:
+        end = '\n' if done == total else ''
+        print(f'\r[localize] {done}/{total} frames', end=end, file=sys.stderr, flush=True)
+    return show
+
+
+def run(args: argparse.Namespace) -> int:
+    """Localize the bag, write the pose bag, print the figures."""
+    pinned = use_one_core() if args.one_core else ''
+    from landmark_db.database import open_database
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.errors import LocalizerError
+    from landmark_localizer.evaluation import evo_ape, format_evaluation
+    from landmark_localizer.localizer import Localizer
+    from landmark_localizer.offline import evaluate_offline, localize_run
+    from landmark_localizer.pose_bags import read_run_bag, write_pose_bag
+
+    out = Path(args.out)
+    if out.exists() and not args.overwrite:
+        raise LocalizerError(f'{out} exists already (use --overwrite to replace it)')
+    if args.limit is not None and args.limit < 1:
+        raise LocalizerError(f'--limit must be >= 1, got {args.limit}')
+    config = LocalizerConfig().with_values(parse_settings(args.settings))
+    database = open_database(args.db)
+    localizer = Localizer(database, config)
+    run_bag = read_run_bag(args.bag, limit=args.limit, image_topic=args.image_topic)
+    result = localize_run(localizer, run_bag, progress=_progress(args.quiet))
+    n_poses = write_pose_bag(out, result.records(), run_bag.truth_messages,
+                             overwrite=args.overwrite)
+    evaluation = evaluate_offline(result, run_bag, localizer.stats.falls_to_lost)
+    if run_bag.truth_messages and n_poses and not args.no_evo:
+        from dataclasses import replace
+
+        evaluation = replace(evaluation, evo=evo_ape(out))
+    title = (f'vbn localize: {args.bag} against {args.db} -> {out} '
+             f'({result.wall_seconds:.1f} s, {run_bag.n_frames / result.wall_seconds:.1f} '
+             f'frames/s{"; " + pinned if pinned else ""})')
+    print(format_evaluation(evaluation, title))
+    stats = localizer.stats
+    print(f'  events            {dict(sorted(stats.events.items()))}')
+    if args.json:
+        figures = evaluation.as_dict()
+        figures.update(bag=str(args.bag), db=str(args.db), out=str(out), one_core=pinned,
+                       wall_seconds=result.wall_seconds, events=dict(stats.events),
+                       votes=stats.votes, settings=config.as_dict())
+        Path(args.json).write_text(json.dumps(figures, indent=1, default=_json_default))
+    return 0
+
+
+def _json_default(value: Any) -> Any:
+    import math
+
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if hasattr(value, 'tolist'):
+        return value.tolist()
+    return str(value)

@@ -1,0 +1,146 @@
+"""The localizer core over a recorded run, offline and as fast as it can (``vbn localize``).
+
+:func:`localize_run` feeds every image of a :class:`~landmark_localizer.pose_bags.RunBag`
+to one :class:`~landmark_localizer.localizer.Localizer`, in the bag's order, with the
+odometry interpolated at the image's stamp (:func:`interpolate_poses`), and times each
+frame as the robot would see it: deserializing and decoding the image included.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+import logging
+import time
+
+import numpy as np
+
+from landmark_localizer.evaluation import VOTING_EVENTS, RunEvaluation, evaluate_run
+from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
+from landmark_localizer.pose_bags import PoseRecord, RunBag
+from visibility_builder.geometry.frames import wrap_angle
+
+__all__ = ['OfflineRun', 'evaluate_offline', 'interpolate_poses', 'localize_run']
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class OfflineRun:
+    """What the localizer found on every frame of a run.
+
+    Attributes:
+        estimates: One per frame, in bag order.
+        decode_seconds: (n,) time to deserialize and decode each image.
+        latency_seconds: (n,) decoding plus the localizer's step.
+        wall_seconds: The whole run.
+    """
+
+    estimates: list[Estimate]
+    decode_seconds: np.ndarray
+    latency_seconds: np.ndarray
+    wall_seconds: float
+
+    def records(self) -> list[PoseRecord]:
+        """Return the estimates as pose-bag records."""
+        return [PoseRecord(e.stamp_ns, e.region, e.pose, e.covariance) for e in self.estimates]
+
+
+def interpolate_poses(stamps_ns: np.ndarray, poses: np.ndarray, query_ns: np.ndarray,
+                      max_gap_s: float = 0.5) -> np.ndarray:
+    """Planar poses interpolated linearly in time (yaw along the shorter arc).
+
+    Args:
+        stamps_ns: (m,) sorted stamps of the poses.
+        poses: (m, 3) ``(x, y, yaw)``.
+        query_ns: (q,) stamps wanted.
+        max_gap_s: a query further than this from the nearest pose, or between two poses
+            further apart than twice this, gets NaN (no odometry there).
+
+    Returns:
+        (q, 3) poses; rows of NaN where there is no odometry.
+
+    Example:
+        >>> interpolate_poses(np.array([0, 10**9]), np.array([[0., 0, 3.1], [1, 0, -3.1]]),
+        ...                   np.array([5 * 10**8])).round(3).tolist()
+        [[0.5, 0.0, -3.142]]
+    """
+    stamps = np.asarray(stamps_ns, np.int64)
+    poses = np.asarray(poses, float).reshape(-1, 3)
+    query = np.asarray(query_ns, np.int64)
+    out = np.full((len(query), 3), np.nan)
+    if len(stamps) == 0:
+        return out
+    if len(stamps) == 1:
+        ok = np.abs(query - stamps[0]) <= max_gap_s * 1e9
+        out[ok] = poses[0]
+        return out
+    right = np.clip(np.searchsorted(stamps, query), 1, len(stamps) - 1)
+    left = right - 1
+    t0, t1 = stamps[left], stamps[right]
+    span = np.maximum(t1 - t0, 1).astype(float)
+    w = np.clip((query - t0) / span, 0.0, 1.0)
+    p0, p1 = poses[left], poses[right]
+    out[:, :2] = p0[:, :2] + w[:, None] * (p1[:, :2] - p0[:, :2])
+    out[:, 2] = wrap_angle(p0[:, 2] + w * wrap_angle(p1[:, 2] - p0[:, 2]))
+    nearest = np.minimum(np.abs(query - t0), np.abs(query - t1))
+    bad = (nearest > max_gap_s * 1e9) | ((t1 - t0) > 2 * max_gap_s * 1e9)
+    out[bad] = np.nan
+    return out
+
+
+def localize_run(localizer: Localizer, run: RunBag, *,
+                 progress: Callable[[int, int], None] | None = None) -> OfflineRun:
+    """Run the localizer over every image of a run.
+
+    Args:
+        localizer: A fresh (or reset) localizer.
+        run: The run's images, odometry and ground truth.
+        progress: Called with ``(frames done, frames)`` after each frame.
+
+    Returns:
+        The estimates and per-frame timings.
+    """
+    odom = interpolate_poses(run.odom_stamps_ns, run.odom_poses, run.stamps_ns)
+    estimates: list[Estimate] = []
+    decode = np.zeros(run.n_frames)
+    latency = np.zeros(run.n_frames)
+    start = time.perf_counter()
+    for i in range(run.n_frames):
+        t0 = time.perf_counter()
+        image = run.decode(i)
+        decode[i] = time.perf_counter() - t0
+        frame_odom = odom[i] if np.all(np.isfinite(odom[i])) else None
+        estimate = localizer.step(Frame(int(run.stamps_ns[i]), image, frame_odom))
+        latency[i] = time.perf_counter() - t0
+        estimates.append(estimate)
+        if progress is not None:
+            progress(i + 1, run.n_frames)
+    wall = time.perf_counter() - start
+    _LOG.info('localized %d frames in %.1f s', run.n_frames, wall)
+    return OfflineRun(estimates, decode, latency, wall)
+
+
+def evaluate_offline(result: OfflineRun, run: RunBag, falls_to_lost: int | None = None
+                     ) -> RunEvaluation:
+    """Compute the figures of an offline run (accuracy against the run's ground truth).
+
+    Args:
+        result: The localizer's output.
+        run: The run it localized.
+        falls_to_lost: The localizer's count (``stats.falls_to_lost``).
+
+    Returns:
+        The evaluation (without evo's figures).
+    """
+    estimates = result.estimates
+    stamps = np.array([e.stamp_ns for e in estimates], np.int64)
+    regions = np.array([e.region for e in estimates], np.int64)
+    poses = np.array([e.pose if e.pose is not None else np.full(3, np.nan)
+                      for e in estimates], float).reshape(-1, 3)
+    events = np.array([e.event for e in estimates], object)
+    voted = np.array([e.state == LOST or e.event in VOTING_EVENTS for e in estimates], bool)
+    order = np.argsort(stamps, kind='stable')
+    return evaluate_run(stamps[order], regions[order], poses[order], run.truth_stamps_ns,
+                        run.truth_poses, events=events[order],
+                        latency_s=result.latency_seconds[order], voted=voted[order],
+                        falls_to_lost=falls_to_lost)
