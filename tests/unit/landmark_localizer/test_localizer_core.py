@@ -1,0 +1,140 @@
+"""The localizer core on a synthetic world with exact answers (tests/localizer_samples.py)."""
+from __future__ import annotations
+
+import math
+
+from localizer_samples import HEIGHT, project, synthetic_database, wall_points
+import numpy as np
+import pytest
+
+from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.errors import LocalizerError
+from landmark_localizer.index import DatabaseIndex, RegionData
+from landmark_localizer.matching import grouped_nearest, mutual_matches, squared_distances
+from landmark_localizer.pose import refine_pose, solve_pose
+from landmark_localizer.switching import MotionPredictor, choose_region
+
+
+@pytest.fixture(scope='module')
+def world():
+    rng = np.random.default_rng(3)
+    points = wall_points(rng, 90)
+    return points, DatabaseIndex(synthetic_database(rng, points))
+
+
+def current_tracks(points: np.ndarray, pose: np.ndarray, noise_px: float = 0.0,
+                   rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray]:
+    uv, ok = project(pose, points)
+    ids = np.flatnonzero(ok)
+    uv = uv[ids]
+    if noise_px:
+        uv = uv + (rng or np.random.default_rng(0)).normal(0, noise_px, uv.shape)
+    return ids.astype(np.int64), uv
+
+
+def test_index_triangulates_the_classes_and_projects_them_back(world) -> None:
+    points, index = world
+    np.testing.assert_allclose(index.points, points - [0, 0, HEIGHT], atol=1e-5)
+    pose = np.array([2.0, 1.3, 0.7])
+    ids, uv = current_tracks(points, pose)
+    predicted, ok = index.project(pose, ids)
+    assert ok.all()
+    np.testing.assert_allclose(predicted, uv, atol=1e-4)
+    assert index.spacing == pytest.approx(0.5)
+    assert index.regions_of_pose(index.nearest_pose([3.0, 1.5])[0]).tolist() == [0, 1]
+
+
+def test_refine_recovers_the_pose_from_a_rough_prediction(world) -> None:
+    points, index = world
+    truth = np.array([1.7, 1.1, -0.4])
+    ids, uv = current_tracks(points, truth)
+    start = truth + np.array([0.06, -0.05, math.radians(2.0)])
+    solution = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig())
+    assert solution is not None and solution.views_used == 3
+    np.testing.assert_allclose(solution.estimate.pose, truth, atol=1e-6)
+    noisy_ids, noisy_uv = current_tracks(points, truth, 0.5, np.random.default_rng(1))
+    noisy = refine_pose(index, index.regions[0], noisy_ids, noisy_uv, start, LocalizerConfig())
+    assert np.hypot(*(noisy.estimate.pose[:2] - truth[:2])) < 0.01
+    assert abs(noisy.estimate.pose[2] - truth[2]) < math.radians(0.2)
+    sd = np.sqrt(np.diag(noisy.estimate.covariance))
+    assert 1e-4 < sd[0] < 0.02 and 1e-4 < sd[1] < 0.02
+
+
+def test_covariance_grows_on_the_line_through_two_views(world) -> None:
+    points, index = world
+    full = index.regions[0]
+    two = RegionData(full.index, full.poses, full.features, full.landmark, full.views[:2])
+    a, b = two.views[0].pose[:2], two.views[1].pose[:2]
+    off_line = np.array([1.0, 1.9, 0.2])
+    on_line = np.array([*(a + 0.4 * (b - a)), 0.2])
+    spread = []
+    for truth in (off_line, on_line):
+        ids, uv = current_tracks(points, truth, 0.3, np.random.default_rng(2))
+        sol = refine_pose(index, two, ids, uv, truth, LocalizerConfig())
+        assert sol is not None
+        spread.append(np.sqrt(np.linalg.eigvalsh(sol.estimate.covariance[:2, :2]).max()))
+    assert spread[1] > 5 * spread[0]
+
+
+def test_closed_form_solve_drops_a_view_with_a_wrong_heading(world) -> None:
+    points, index = world
+    truth = np.array([2.2, 1.4, 1.1])
+    ids, uv = current_tracks(points, truth)
+    region = index.regions[0]
+    exact = solve_pose(index, region, ids, uv, LocalizerConfig(), np.random.default_rng(0))
+    assert exact is not None and exact.views_used == 3
+    np.testing.assert_allclose(exact.estimate.pose, truth, atol=1e-4)
+    # Corrupt view 2: its keypoints rotated 15 degrees of azimuth (a consistent wrong
+    # motion: a heading that disagrees with the two other views).
+    bad = region.views[2]
+    shifted = bad.keypoints.copy()
+    shifted[:, 0] = (shifted[:, 0] + 1024 * 15 / 360) % 1024
+    views = (*region.views[:2], type(bad)(bad.pose, bad.class_ids, shifted, bad.descriptors,
+                                          bad.position))
+    corrupted = RegionData(region.index, region.poses, region.features, region.landmark, views)
+    sol = solve_pose(index, corrupted, ids, uv, LocalizerConfig(), np.random.default_rng(0))
+    assert sol is not None and sol.views_used == 2
+    np.testing.assert_allclose(sol.estimate.pose, truth, atol=1e-3)
+
+
+def test_switch_before_leaving_the_region(world) -> None:
+    _, index = world
+    # Region 0 spans x <= 3.5, region 1 x >= 2.5: moving east from x = 3.0 leaves region 0.
+    assert choose_region(index, 0, np.array([3.0, 1.5]), np.array([3.6, 1.5]), 1.0, {}) == 1
+    assert choose_region(index, 0, np.array([3.0, 1.5]), np.array([2.4, 1.5]), 1.0, {}) is None
+    assert choose_region(index, 0, np.array([1.0, 1.5]), np.array([1.3, 1.5]), 1.0, {}) is None
+
+
+def test_motion_predictor_from_history_and_from_odometry() -> None:
+    history = MotionPredictor()
+    for i in range(5):
+        history.add(i * 10**8, np.array([0.05 * i, 0.0, 0.0]), None)
+    np.testing.assert_allclose(history.predict(np.array([0.2, 0.0, 0.0]), 1.0), [0.7, 0, 0],
+                               atol=1e-9)
+    odom = MotionPredictor()
+    # The robot faces +y in map (yaw pi/2) while odometry's frame has it face +x.
+    for i in range(5):
+        odom.add(i * 10**8, np.array([1.0, 2.0, math.pi / 2]), np.array([0.1 * i, 0.0, 0.0]))
+    v = odom.velocity()
+    np.testing.assert_allclose(v, [0.0, 1.0, 0.0], atol=1e-9)
+
+
+def test_matching_by_hand() -> None:
+    a = np.array([[0, 0], [10, 0], [0, 10]], np.float32)
+    b = np.array([[0, 1], [10, 1], [5, 5], [0, 12]], np.float32)
+    pairs = mutual_matches(a, b, ratio=0.9, max_distance=5)
+    assert pairs.tolist() == [[0, 0], [1, 1], [2, 3]]
+    d2 = squared_distances(a, b)
+    best, d1, d_other = grouped_nearest(d2, np.array([0, 1, 1, 2]), 3)
+    assert best.tolist() == [0, 1, 2]
+    assert d1.tolist() == pytest.approx([1.0, 1.0, 2.0])
+    assert d_other[0] == pytest.approx(math.sqrt(50))  # nearest of class 1: (5, 5)
+
+
+def test_config_refuses_bad_values() -> None:
+    with pytest.raises(LocalizerError, match='unknown method'):
+        LocalizerConfig(method='nope')
+    with pytest.raises(LocalizerError, match='lk_window must be odd'):
+        LocalizerConfig(lk_window=20)
+    with pytest.raises(LocalizerError, match="unknown localizer setting 'nope'"):
+        LocalizerConfig().with_values({'nope': 1})
