@@ -1,0 +1,42 @@
+"""The localizer node's defaults file equals the code's defaults; every parameter is described."""
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+
+import pytest
+import yaml
+
+from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.errors import LocalizerError
+from landmark_localizer.node import NodeSettings, config_descriptions
+
+YAML = Path(__file__).resolve().parents[3] / 'ros2_ws' / 'src' / 'landmark_localizer' / \
+    'config' / 'localizer.yaml'
+
+
+def test_yaml_defaults_equal_the_code_defaults() -> None:
+    params = yaml.safe_load(YAML.read_text())['localizer']['ros__parameters']
+    assert params == {**asdict(NodeSettings()), **LocalizerConfig().as_dict()}
+
+
+def test_node_and_core_names_do_not_collide() -> None:
+    assert not set(asdict(NodeSettings())) & set(LocalizerConfig().as_dict())
+
+
+@pytest.mark.parametrize('cls', [NodeSettings, LocalizerConfig])
+def test_every_parameter_has_a_description(cls) -> None:
+    descriptions = config_descriptions(cls)
+    assert [name for name, text in descriptions.items() if len(text) < 8] == []
+
+
+def test_descriptions_join_continuation_lines() -> None:
+    text = config_descriptions(NodeSettings)['transform_tolerance']
+    assert text.startswith('How far ahead') and text.endswith("(AMCL's parameter).")
+
+
+def test_bad_node_settings_are_one_line_errors() -> None:
+    with pytest.raises(LocalizerError, match='transform_tolerance must be a finite number'):
+        NodeSettings(transform_tolerance=float('nan'))
+    with pytest.raises(LocalizerError, match='three different names'):
+        NodeSettings(odom_frame_id='map')
