@@ -49,6 +49,12 @@ def register(subparsers: Any) -> None:
                         help='image topic (default /camera/image_raw, else .../compressed)')
     parser.add_argument('--one-core', action='store_true',
                         help='one BLAS and OpenCV thread, pinned to one CPU (latency figures)')
+    parser.add_argument('--baseline', metavar='EXPLORATION_BAGDIR', default=None,
+                        help='localize with the baseline instead: every frame matched '
+                             'against every SIFT feature of this exploration bag '
+                             '(landmark_localizer.baseline; --db gives the SIFT settings)')
+    parser.add_argument('--baseline-cache', metavar='FILE.npz', default=None,
+                        help="keep the baseline's full feature database in this file")
     parser.add_argument('--no-evo', action='store_true', help='skip the check by evo_ape')
     parser.add_argument('--json', metavar='FILE', default=None,
                         help='write the figures as JSON into FILE')
@@ -59,9 +65,9 @@ def register(subparsers: Any) -> None:
 def use_one_core() -> str:
     """One BLAS and OpenCV thread, and this process pinned to one CPU where possible.
 
-    OpenBLAS reads its thread count when numpy is first imported: set
-    ``OPENBLAS_NUM_THREADS=1`` in the environment of a process that has imported numpy
-    already (``vbn bench-localize`` does for its children).
+    OpenBLAS reads its thread count when numpy is first imported: call this before, or
+    set ``OPENBLAS_NUM_THREADS=1`` in the environment (``vbn bench-localize`` does for
+    its children). Processes started afterwards inherit the pinning.
 
     Returns:
         What was done, for the summary.
@@ -110,7 +116,9 @@ def _progress(quiet: bool):  # noqa: ANN202 - a small closure
 
 def run(args: argparse.Namespace) -> int:
     """Localize the bag, write the pose bag, print the figures."""
-    pinned = use_one_core() if args.one_core else ''
+    if args.one_core:  # before numpy is imported: OpenBLAS reads it once
+        for name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+            os.environ.setdefault(name, '1')
     from landmark_db.database import open_database
     from landmark_localizer.config import LocalizerConfig
     from landmark_localizer.errors import LocalizerError
@@ -126,29 +134,56 @@ def run(args: argparse.Namespace) -> int:
         raise LocalizerError(f'--limit must be >= 1, got {args.limit}')
     config = LocalizerConfig().with_values(parse_settings(args.settings))
     database = open_database(args.db)
-    localizer = Localizer(database, config)
+    if args.baseline:
+        from landmark_localizer.baseline import FullDatabaseLocalizer, build_full_database
+        from visibility_builder.features import SiftConfig
+
+        sift = SiftConfig(**{k: v for k, v in database.info.sift.items()
+                             if k in SiftConfig.__dataclass_fields__})
+        full = build_full_database(args.baseline, sift, cache=args.baseline_cache)
+        localizer = FullDatabaseLocalizer(full)
+        size_bytes = full.nbytes
+    else:
+        localizer = Localizer(database, config)
+        size_bytes = Path(args.db).stat().st_size
     run_bag = read_run_bag(args.bag, limit=args.limit, image_topic=args.image_topic)
+    pinned = use_one_core() if args.one_core else ''  # after the baseline's SIFT pool
     result = localize_run(localizer, run_bag, progress=_progress(args.quiet))
     n_poses = write_pose_bag(out, result.records(), run_bag.truth_messages,
                              overwrite=args.overwrite)
-    evaluation = evaluate_offline(result, run_bag, localizer.stats.falls_to_lost)
+    stats = getattr(localizer, 'stats', None)
+    evaluation = evaluate_offline(result, run_bag, stats.falls_to_lost if stats else None)
     if run_bag.truth_messages and n_poses and not args.no_evo:
         from dataclasses import replace
 
         evaluation = replace(evaluation, evo=evo_ape(out))
-    title = (f'vbn localize: {args.bag} against {args.db} -> {out} '
+    against = f'the full feature database of {args.baseline}' if args.baseline else args.db
+    title = (f'vbn localize: {args.bag} against {against} ({size_bytes / 1e6:.2f} MB) -> {out} '
              f'({result.wall_seconds:.1f} s, {run_bag.n_frames / result.wall_seconds:.1f} '
              f'frames/s{"; " + pinned if pinned else ""})')
     print(format_evaluation(evaluation, title))
-    stats = localizer.stats
-    print(f'  events            {dict(sorted(stats.events.items()))}')
+    events = dict(sorted(stats.events.items())) if stats else {}
+    if stats:
+        print(f'  events            {events}')
     if args.json:
         figures = evaluation.as_dict()
-        figures.update(bag=str(args.bag), db=str(args.db), out=str(out), one_core=pinned,
-                       wall_seconds=result.wall_seconds, events=dict(stats.events),
-                       votes=stats.votes, settings=config.as_dict())
+        figures.update(bag=str(args.bag), db=str(args.db), baseline=args.baseline,
+                       size_bytes=size_bytes, out=str(out), one_core=pinned,
+                       wall_seconds=result.wall_seconds, events=events,
+                       votes=stats.votes if stats else None, settings=config.as_dict(),
+                       frames_detail=_frames_detail(result.estimates))
         Path(args.json).write_text(json.dumps(figures, indent=1, default=_json_default))
     return 0
+
+
+def _frames_detail(estimates: list) -> dict[str, list]:
+    """Per-frame state, region, event and step time (to say which frames fell short)."""
+    return {'stamp_ns': [e.stamp_ns for e in estimates],
+            'state': [e.state for e in estimates],
+            'region': [e.region for e in estimates],
+            'event': [e.event for e in estimates],
+            'has_pose': [e.pose is not None for e in estimates],
+            'seconds': [round(e.seconds, 6) for e in estimates]}
 
 
 def _json_default(value: Any) -> Any:
