@@ -26,6 +26,7 @@ setup(
         ],
         'vbn.commands': [
             'localize = landmark_localizer.cli.localize:register',
+            'bench-localize = landmark_localizer.cli.bench_localize:register',
         ],
     },
 )

@@ -1,0 +1,95 @@
+"""vbn localize on the sample run: the issue's accuracy and availability, read back by evo.
+
+The room database is built once per session with the correspondence settings that
+cover the room (``classes.tau=120``, ``classes.symmetry_factor=1``); the whole of
+``bags/room_run`` (439 panoramas) is localized offline in about 10 s.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from landmark_localizer.evaluation import evo_ape, pose_accuracy
+from landmark_localizer.pose_bags import read_pose_bag
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+BAGS = ROOT / 'bags'
+BUILD_SETTINGS = ['--set', 'classes.tau=120', '--set', 'classes.symmetry_factor=1']
+
+
+def vbn(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run(['vbn', *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope='session')
+def room_db(tmp_path_factory) -> Path:
+    db = tmp_path_factory.mktemp('localize_room') / 'room.db'
+    proc = vbn('build', str(BAGS / 'room_exploration'), '--db', str(db), '--quiet',
+               *BUILD_SETTINGS)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return db
+
+
+@pytest.fixture(scope='session')
+def room_run(room_db: Path, tmp_path_factory) -> dict:
+    folder = tmp_path_factory.mktemp('localize_run')
+    out, figures = folder / 'poses', folder / 'figures.json'
+    proc = vbn('localize', str(BAGS / 'room_run'), '--db', str(room_db), '--out', str(out),
+               '--json', str(figures), '--quiet')
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return {'out': out, 'figures': json.loads(figures.read_text()), 'stdout': proc.stdout}
+
+
+def test_room_run_meets_the_accuracy_and_availability_targets(room_run: dict) -> None:
+    figures = room_run['figures']
+    assert figures['frames'] == 439
+    assert figures['availability'] >= 0.98
+    evo = figures['evo']
+    assert evo['translation_median_m'] <= 0.01
+    assert evo['translation_p95_m'] <= 0.05
+    assert evo['heading_median_deg'] <= 0.2
+    assert figures['changes']['predicted_fraction'] >= 0.90
+    # Ours and evo's agree: the same poses paired with the same ground truth.
+    ours = figures['accuracy']
+    assert ours['matched'] == evo['matched'] == figures['poses']
+    assert ours['translation_median_m'] == pytest.approx(evo['translation_median_m'],
+                                                         abs=1e-6)
+    assert 'availability' in room_run['stdout'] and 'accuracy (evo)' in room_run['stdout']
+
+
+def test_pose_bag_holds_every_frame_and_the_ground_truth(room_run: dict) -> None:
+    bag = read_pose_bag(room_run['out'])
+    figures = room_run['figures']
+    assert len(bag.regions) == figures['frames']
+    assert len(bag.poses) == figures['poses'] == len(bag.covariances)
+    assert len(bag.truth_poses) == 439
+    assert np.all(np.linalg.eigvalsh(bag.covariances) > 0)
+    acc = pose_accuracy(bag.pose_stamps_ns, bag.poses, bag.truth_stamps_ns, bag.truth_poses)
+    assert acc.translation_median_m == pytest.approx(
+        figures['accuracy']['translation_median_m'], abs=1e-6)
+
+
+def test_evo_ape_command_reads_the_output(room_run: dict) -> None:
+    evo_cli = Path(sys.executable).parent / 'evo_ape'
+    proc = subprocess.run([str(evo_cli), 'bag2', str(room_run['out']), '/ground_truth/pose',
+                           '/localizer/pose', '--no_warnings'], capture_output=True,
+                          text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    median = next(float(line.split()[1]) for line in proc.stdout.splitlines()
+                  if line.strip().startswith('median'))
+    assert median == pytest.approx(evo_ape(room_run['out']).translation_median_m, abs=1e-6)
+    assert median <= 0.01
+
+
+def test_existing_output_is_refused(room_db: Path, room_run: dict) -> None:
+    proc = vbn('localize', str(BAGS / 'room_run'), '--db', str(room_db), '--out',
+               str(room_run['out']), '--limit', '2')
+    assert proc.returncode == 2
+    assert 'exists already' in proc.stderr and proc.stderr.count('\n') == 1
