@@ -120,6 +120,8 @@ class RunEvaluation:
         accuracy: Errors against the ground truth (None without ground truth).
         evo: The same accuracy computed by evo (None when not run).
         recovery: Frames from each teleport to a correct pose (None: never).
+        cpu_latency: Per-frame CPU time of the process (offline runs), the cost on one
+            core whatever else the machine runs.
     """
 
     frames: int
@@ -130,6 +132,7 @@ class RunEvaluation:
     accuracy: Accuracy | None = None
     evo: Accuracy | None = None
     recovery: list[int | None] = field(default_factory=list)
+    cpu_latency: Latency | None = None
 
     @property
     def availability(self) -> float:
@@ -561,9 +564,10 @@ def format_evaluation(evaluation: RunEvaluation, title: str = '') -> str:
     lost = '' if e.falls_to_lost is None else f', {e.falls_to_lost} falls to LOST'
     lines.append(f'  region changes    {ch.predicted} by prediction, {ch.after_loss} after '
                  f'loss ({ch.predicted_fraction * 100:.1f} % predicted){lost}')
-    if e.latency is not None:
-        lat = e.latency
-        lines.append(f'  latency           p50 {lat.p50 * 1e3:.1f} ms, p95 {lat.p95 * 1e3:.1f} ms;'
+    for name, lat in (('latency', e.latency), ('CPU per frame', e.cpu_latency)):
+        if lat is None:
+            continue
+        lines.append(f'  {name:<17} p50 {lat.p50 * 1e3:.1f} ms, p95 {lat.p95 * 1e3:.1f} ms;'
                      f' TRACKING p50 {lat.tracking_p50 * 1e3:.1f} / p95 '
                      f'{lat.tracking_p95 * 1e3:.1f} ms ({lat.tracking_frames} frames); LOST '
                      f'p50 {lat.lost_p50 * 1e3:.1f} / p95 {lat.lost_p95 * 1e3:.1f} ms '

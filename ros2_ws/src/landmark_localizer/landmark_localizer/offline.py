@@ -8,13 +8,18 @@ frame as the robot would see it: deserializing and decoding the image included.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import logging
 import time
 
 import numpy as np
 
-from landmark_localizer.evaluation import VOTING_EVENTS, RunEvaluation, evaluate_run
+from landmark_localizer.evaluation import (
+    VOTING_EVENTS,
+    RunEvaluation,
+    evaluate_run,
+    latency_summary,
+)
 from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
 from landmark_localizer.pose_bags import PoseRecord, RunBag
 from visibility_builder.geometry.frames import wrap_angle
@@ -31,14 +36,17 @@ class OfflineRun:
     Attributes:
         estimates: One per frame, in bag order.
         decode_seconds: (n,) time to deserialize and decode each image.
-        latency_seconds: (n,) decoding plus the localizer's step.
+        latency_seconds: (n,) decoding plus the localizer's step, wall-clock time.
         wall_seconds: The whole run.
+        cpu_seconds: (n,) the same as CPU time of the process (every thread): what the
+            frame costs on one core, whatever else the machine runs.
     """
 
     estimates: list[Estimate]
     decode_seconds: np.ndarray
     latency_seconds: np.ndarray
     wall_seconds: float
+    cpu_seconds: np.ndarray | None = None
 
     def records(self) -> list[PoseRecord]:
         """Return the estimates as pose-bag records."""
@@ -104,20 +112,23 @@ def localize_run(localizer: Localizer, run: RunBag, *,
     estimates: list[Estimate] = []
     decode = np.zeros(run.n_frames)
     latency = np.zeros(run.n_frames)
+    cpu = np.zeros(run.n_frames)
     start = time.perf_counter()
     for i in range(run.n_frames):
+        c0 = time.process_time()
         t0 = time.perf_counter()
         image = run.decode(i)
         decode[i] = time.perf_counter() - t0
         frame_odom = odom[i] if np.all(np.isfinite(odom[i])) else None
         estimate = localizer.step(Frame(int(run.stamps_ns[i]), image, frame_odom))
         latency[i] = time.perf_counter() - t0
+        cpu[i] = time.process_time() - c0
         estimates.append(estimate)
         if progress is not None:
             progress(i + 1, run.n_frames)
     wall = time.perf_counter() - start
     _LOG.info('localized %d frames in %.1f s', run.n_frames, wall)
-    return OfflineRun(estimates, decode, latency, wall)
+    return OfflineRun(estimates, decode, latency, wall, cpu)
 
 
 def evaluate_offline(result: OfflineRun, run: RunBag, falls_to_lost: int | None = None
@@ -140,7 +151,11 @@ def evaluate_offline(result: OfflineRun, run: RunBag, falls_to_lost: int | None 
     events = np.array([e.event for e in estimates], object)
     voted = np.array([e.state == LOST or e.event in VOTING_EVENTS for e in estimates], bool)
     order = np.argsort(stamps, kind='stable')
-    return evaluate_run(stamps[order], regions[order], poses[order], run.truth_stamps_ns,
-                        run.truth_poses, events=events[order],
-                        latency_s=result.latency_seconds[order], voted=voted[order],
-                        falls_to_lost=falls_to_lost)
+    evaluation = evaluate_run(stamps[order], regions[order], poses[order],
+                              run.truth_stamps_ns, run.truth_poses, events=events[order],
+                              latency_s=result.latency_seconds[order], voted=voted[order],
+                              falls_to_lost=falls_to_lost)
+    if result.cpu_seconds is None:
+        return evaluation
+    return replace(evaluation, cpu_latency=latency_summary(result.cpu_seconds[order],
+                                                           voted[order]))
