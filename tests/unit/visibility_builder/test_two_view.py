@@ -252,6 +252,19 @@ def test_identical_poses_are_refused(camera, method, noise):
             relative_motion(views.uv[0], views.uv[1], camera, method=method, rng=seed)
 
 
+def test_the_parallax_ratio_can_be_disabled():
+    rng = np.random.default_rng(10)
+    pose = _pano_poses(rng)[0]
+    views = render_views(PANO, np.stack([pose, pose]), rng, noise_px=0.5)
+    with pytest.raises(VisibilityBuilderError, match='same place'):
+        relative_motion(views.uv[0], views.uv[1], PANO, rng=0)
+    motion = relative_motion(views.uv[0], views.uv[1], PANO, rng=0,
+                             config=TwoViewConfig(min_parallax_ratio=0.0))
+    assert motion.inliers.sum() > 40
+    with pytest.raises(VisibilityBuilderError, match='min_parallax_ratio must be >= 0'):
+        TwoViewConfig(min_parallax_ratio=-1.0)
+
+
 @pytest.mark.parametrize('method', PANO_METHODS)
 def test_two_centimetres_apart_are_not_refused_without_noise(method):
     rng = np.random.default_rng(9)

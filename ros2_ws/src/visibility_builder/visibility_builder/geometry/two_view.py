@@ -148,6 +148,7 @@ class TwoViewConfig:
             measured 1.3 to 2.3 for identical poses with 0.5 px of noise, 1.8 to 3.8
             for 2 cm apart, 2.3 to 8 for 5 cm); otherwise the views are (nearly) at
             the same place and the direction of translation is undetermined.
+        min_parallax_ratio: the factor 2.5 above (0 disables this test).
     """
 
     threshold_px: float = 1.5
@@ -158,6 +159,7 @@ class TwoViewConfig:
     refine: bool = True
     noise_floor_px: float = 0.1
     min_parallax_px: float = 0.25
+    min_parallax_ratio: float = 2.5
 
     def __post_init__(self) -> None:
         """Reject invalid values with a :class:`VisibilityBuilderError`."""
@@ -165,6 +167,9 @@ class TwoViewConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise VisibilityBuilderError(f'{name} must be a positive number, got {value}')
+        if not (math.isfinite(self.min_parallax_ratio) and self.min_parallax_ratio >= 0):
+            raise VisibilityBuilderError(f'min_parallax_ratio must be >= 0, got '
+                                         f'{self.min_parallax_ratio}')
         if not 0.0 <= self.min_elevation_deg < 90.0:
             raise VisibilityBuilderError(
                 f'min_elevation_deg must be in [0, 90), got {self.min_elevation_deg}')
@@ -435,16 +440,16 @@ def _finish(theta: float, phi: float, f_model: np.ndarray, f_current: np.ndarray
 
 
 def _check_translation(f_model: np.ndarray, f_current: np.ndarray, min_parallax: float,
-                       method: str, residual: float = 0.0) -> None:
+                       method: str, residual: float = 0.0, ratio: float = 2.5) -> None:
     """Refuse views whose parallax is not above the noise.
 
     The median angle that the best pure rotation leaves between the rays must
-    exceed ``min_parallax`` and 2.5 times the inliers' RMS epipolar error: with
+    exceed ``min_parallax`` and ``ratio`` times the inliers' RMS epipolar error: with
     less, a rotation alone explains the data and the direction of translation is
     noise.
     """
     parallax = _parallax(f_model, f_current)
-    needed = max(min_parallax, 2.5 * residual)
+    needed = max(min_parallax, ratio * residual)
     if parallax < needed:
         raise VisibilityBuilderError(
             f'{method}: the views are at (nearly) the same place: median parallax '
@@ -501,7 +506,7 @@ def _pair_rotations(v: np.ndarray, w: np.ndarray, j: np.ndarray,
 
 
 def _histogram_modes(thetas: np.ndarray, bins: int = 360, modes: int = 3,
-                     half_width: int = 2, limit: int = 400) -> np.ndarray:
+                     half_width: int = 2, limit: int = 200) -> np.ndarray:
     """Return indices of the candidate angles near the histogram's highest modes.
 
     Half of the candidates are wrong roots and more come from outlier pairs, spread
@@ -550,14 +555,16 @@ def panoramic_planar_motion(rays_model: np.ndarray, rays_current: np.ndarray, *,
                             min_elevation: float = math.radians(2.0),
                             max_pairs: int = 1500, refine: bool = True,
                             noise_floor: float = 1e-4, min_parallax: float = 1.5e-3,
+                            min_parallax_ratio: float = 2.5,
                             rng: np.random.Generator | int | None = None) -> RelativeMotion:
     """Estimate planar motion between two panoramas in closed form (thesis 7.5.2).
 
     Every pair ``(j, k)`` of usable correspondences gives the quadratic of eq. 7.15 in
     ``r`` and, from its two roots, two candidate rotations (eq. 7.16). The robust
     choice of ``theta`` is a consensus over these candidates (the thesis's
-    ``psi_tau``, the largest set of correspondences agreeing on one direction): each
-    candidate, with the translation its own pair gives, is scored on all
+    ``psi_tau``, the largest set of correspondences agreeing on one direction): the
+    candidates vote in one-degree bins, and those near the three highest modes (at
+    most 200), each with the translation its own pair gives, are scored on all
     correspondences by a truncated sum of squared Sampson errors (MSAC), in one
     vectorised pass. The best candidate's inliers then refine ``theta`` by
     minimising the smallest eigenvalue of the scatter of ``v + R_theta w`` (the
@@ -571,12 +578,14 @@ def panoramic_planar_motion(rays_model: np.ndarray, rays_current: np.ndarray, *,
     correspondence, which leaves eqs. 7.13 to 7.16 unchanged and stays finite at
     elevation 0 (only ``y0`` matters, as "Advantages of Using Panoramic Cameras"
     says); the robust step is a consensus rather than EM on a mixture (EM needs a
-    starting point and the consensus is exhaustive on 50 points, 2,450 candidates).
+    starting point, and the right candidates pile up in one bin: 2,450 candidates on
+    50 points, a quarter of them right with 30 % outliers).
     Correspondences below ``min_elevation`` in either view are not used (eq. 7.20),
     nor are those whose two elevations have opposite signs (no point is above one
     camera and below the other when both are at the same height).
 
-    Complexity ``O(p n)`` for ``p = min(n (n - 1) / 2, max_pairs)`` pairs.
+    Complexity ``O(p + c n)`` for ``p = min(n (n - 1) / 2, max_pairs)`` pairs and
+    ``c <= 200`` scored candidates: about 3 ms of CPU on 50 points.
 
     Args:
         rays_model: ``(n, 3)`` unit rays of the model panorama (optical frame).
@@ -587,6 +596,8 @@ def panoramic_planar_motion(rays_model: np.ndarray, rays_current: np.ndarray, *,
         refine: polish by Gauss-Newton.
         noise_floor: smallest noise for the covariance, radians.
         min_parallax: smallest median parallax after rotation, radians.
+        min_parallax_ratio: the parallax must also exceed this many times the
+            inliers' RMS error (see :class:`TwoViewConfig`).
         rng: random generator or seed (used only with more than ``max_pairs`` pairs).
 
     Returns:
@@ -675,7 +686,8 @@ def panoramic_planar_motion(rays_model: np.ndarray, rays_current: np.ndarray, *,
         if refine:
             theta, phi = _refine_planar(theta, phi, f1[inliers], f2[inliers])
     residual = _rms(planar_epipolar_residuals(f1[inliers], f2[inliers], theta, phi))
-    _check_translation(f1[inliers], f2[inliers], min_parallax, method, residual)
+    _check_translation(f1[inliers], f2[inliers], min_parallax, method, residual,
+                       min_parallax_ratio)
     return _finish(theta, phi, f1, f2, inliers, method, noise_floor)
 
 
@@ -724,6 +736,7 @@ def pinhole_planar_essential(rays_model: np.ndarray, rays_current: np.ndarray, *
                              threshold: float = 1.5 / 320.0, max_iterations: int = 1000,
                              confidence: float = 0.999, refine: bool = True,
                              noise_floor: float = 1e-4, min_parallax: float = 8e-4,
+                             min_parallax_ratio: float = 2.5,
                              rng: np.random.Generator | int | None = None) -> RelativeMotion:
     """Estimate planar motion from the planar essential matrix (thesis 7.5.1).
 
@@ -751,6 +764,8 @@ def pinhole_planar_essential(rays_model: np.ndarray, rays_current: np.ndarray, *
         refine: polish by Gauss-Newton.
         noise_floor: smallest noise for the covariance, radians.
         min_parallax: smallest median parallax after rotation, radians.
+        min_parallax_ratio: the parallax must also exceed this many times the
+            inliers' RMS error (see :class:`TwoViewConfig`).
         rng: random generator or seed.
 
     Returns:
@@ -795,7 +810,8 @@ def pinhole_planar_essential(rays_model: np.ndarray, rays_current: np.ndarray, *
     if refine:
         theta, phi = _refine_planar(theta, phi, f1[inliers], f2[inliers])
     residual = _rms(planar_epipolar_residuals(f1[inliers], f2[inliers], theta, phi))
-    _check_translation(f1[inliers], f2[inliers], min_parallax, method, residual)
+    _check_translation(f1[inliers], f2[inliers], min_parallax, method, residual,
+                       min_parallax_ratio)
     return _finish(theta, phi, f1, f2, inliers, method, noise_floor)
 
 
@@ -855,7 +871,7 @@ def _decompose_essential(E: np.ndarray, f1: np.ndarray,
 def general_essential(rays_model: np.ndarray, rays_current: np.ndarray, *,
                       threshold: float = 1.5 / 320.0, max_iterations: int = 1000,
                       confidence: float = 0.999, noise_floor: float = 1e-4,
-                      min_parallax: float = 8e-4,
+                      min_parallax: float = 8e-4, min_parallax_ratio: float = 2.5,
                       rng: np.random.Generator | int | None = None) -> RelativeMotion:
     """Estimate the full relative motion from the essential matrix (thesis 7.4).
 
@@ -877,6 +893,8 @@ def general_essential(rays_model: np.ndarray, rays_current: np.ndarray, *,
         confidence: RANSAC confidence.
         noise_floor: smallest noise for the covariance, radians.
         min_parallax: smallest median parallax after rotation, radians.
+        min_parallax_ratio: the parallax must also exceed this many times the
+            inliers' RMS error (see :class:`TwoViewConfig`).
         rng: random generator or seed.
 
     Returns:
@@ -921,7 +939,8 @@ def general_essential(rays_model: np.ndarray, rays_current: np.ndarray, *,
                                      f'of {n} correspondences (needs 8)')
     R, T = _decompose_essential(E, f1[inliers], f2[inliers])
     residual = _rms(_sampson(E, f1[inliers], f2[inliers]))
-    _check_translation(f1[inliers], f2[inliers], min_parallax, method, residual)
+    _check_translation(f1[inliers], f2[inliers], min_parallax, method, residual,
+                       min_parallax_ratio)
     theta, centre, planar_rotation = _optical_to_planar(R, T)
     direction = centre / np.linalg.norm(centre)
     phi = float(math.atan2(direction[1], direction[0]))
@@ -1168,7 +1187,8 @@ def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: Camera
     rays_model, rays_current = camera.unproject(uv_model), camera.unproject(uv_current)
     f = _focal(camera)
     common = {'threshold': config.threshold_px / f, 'noise_floor': config.noise_floor_px / f,
-              'min_parallax': config.min_parallax_px / f, 'rng': rng}
+              'min_parallax': config.min_parallax_px / f,
+              'min_parallax_ratio': config.min_parallax_ratio, 'rng': rng}
     if method == 'panoramic_planar':
         if camera.kind != 'panoramic':
             raise VisibilityBuilderError(f'panoramic_planar needs a panoramic camera, got '
