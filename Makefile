@@ -58,7 +58,7 @@ test: setup
 	source env.sh && ruff check . && pytest
 
 demo: setup
-	source env.sh && vbn doctor
+	source env.sh && vbn demo --out out/demo
 
 # The committed samples in bags/ (34 MB). Regenerate only when their content must change:
 # rendering is deterministic, so an unchanged renderer reproduces them byte for byte.

@@ -567,6 +567,9 @@ def format_evaluation(evaluation: RunEvaluation, title: str = '') -> str:
     for name, lat in (('latency', e.latency), ('CPU per frame', e.cpu_latency)):
         if lat is None:
             continue
+        if lat.tracking_frames + lat.lost_frames == 0:  # not split by state (the node's)
+            lines.append(f'  {name:<17} p50 {lat.p50 * 1e3:.1f} ms, p95 {lat.p95 * 1e3:.1f} ms')
+            continue
         lines.append(f'  {name:<17} p50 {lat.p50 * 1e3:.1f} ms, p95 {lat.p95 * 1e3:.1f} ms;'
                      f' TRACKING p50 {lat.tracking_p50 * 1e3:.1f} / p95 '
                      f'{lat.tracking_p95 * 1e3:.1f} ms ({lat.tracking_frames} frames); LOST '

@@ -42,6 +42,7 @@ TRUTH_TOPIC = '/ground_truth/pose'
 POSE_TOPIC = '/localizer/pose'
 COVARIANCE_TOPIC = '/localizer/pose_with_covariance'
 REGION_TOPIC = '/localizer/region'
+DIAGNOSTICS_TOPIC = '/diagnostics'
 
 _POSE_TYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped',
                'nav_msgs/msg/Odometry')
@@ -118,6 +119,8 @@ class PoseBag:
         region_times_ns: (r,) their bag times.
         truth_stamps_ns: (g,) stamps of ``/ground_truth/pose``.
         truth_poses: (g, 3) its planar poses.
+        diagnostics: The localizer node's ``/diagnostics`` key-values, oldest first
+            (recordings of the node only).
     """
 
     pose_stamps_ns: np.ndarray
@@ -128,6 +131,7 @@ class PoseBag:
     region_times_ns: np.ndarray
     truth_stamps_ns: np.ndarray
     truth_poses: np.ndarray
+    diagnostics: tuple[dict[str, str], ...] = ()
 
 
 def _stamp(header: Any, fallback_ns: int) -> int:
@@ -319,15 +323,19 @@ def read_pose_bag(path: str | os.PathLike[str]) -> PoseBag:
     covs: list[np.ndarray] = []
     regions: list[int] = []
     region_times: list[int] = []
+    diagnostics: list[dict[str, str]] = []
     with bag:
         if POSE_TOPIC not in bag.topics:
             raise LocalizerError(f'bag {path} has no {POSE_TOPIC} topic')
-        wanted = [t for t in (POSE_TOPIC, COVARIANCE_TOPIC, REGION_TOPIC, TRUTH_TOPIC)
-                  if t in bag.topics]
+        wanted = [t for t in (POSE_TOPIC, COVARIANCE_TOPIC, REGION_TOPIC, TRUTH_TOPIC,
+                              DIAGNOSTICS_TOPIC) if t in bag.topics]
         try:
             for topic, msgtype, bag_ns, raw in bag.messages(topics=wanted):
                 msg = deserialize(raw, msgtype)
-                if topic == REGION_TOPIC:
+                if topic == DIAGNOSTICS_TOPIC:
+                    diagnostics += [{kv.key: kv.value for kv in status.values}
+                                    for status in msg.status if status.name == 'localizer']
+                elif topic == REGION_TOPIC:
                     regions.append(int(msg.data))
                     region_times.append(bag_ns)
                 elif topic == COVARIANCE_TOPIC:
@@ -345,4 +353,5 @@ def read_pose_bag(path: str | os.PathLike[str]) -> PoseBag:
     truth_stamps, truth_values = _sorted(*truth)
     return PoseBag(pose_stamps, pose_values, np.asarray(cov_stamps, np.int64),
                    np.asarray(covs, float).reshape(-1, 3, 3), np.asarray(regions, np.int64),
-                   np.asarray(region_times, np.int64), truth_stamps, truth_values)
+                   np.asarray(region_times, np.int64), truth_stamps, truth_values,
+                   tuple(diagnostics))

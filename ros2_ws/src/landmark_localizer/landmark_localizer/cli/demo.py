@@ -1,0 +1,305 @@
+"""``vbn demo``: the whole system on the sample bags, over DDS, ending in PASS or FAIL.
+
+Example (what ``make demo`` runs)::
+
+    vbn demo --out out/demo
+
+Steps, each a subprocess as a user would run it:
+
+1. ``vbn build bags/room_exploration --db OUT/room.db`` (the landmark database);
+2. the localizer node (``localizer --ros-args -p db:=OUT/room.db``, the executable
+   ``ros2 run landmark_localizer localizer`` starts);
+3. ``vbn record`` of ``/localizer/pose``, ``/localizer/pose_with_covariance``,
+   ``/localizer/region``, ``/ground_truth/pose`` and ``/diagnostics`` into
+   ``OUT/recorded``;
+4. ``vbn play bags/room_run --wait-for-subscribers`` (the camera, its calibration,
+   odometry and ground truth) to the node in real time.
+
+Then the recording is evaluated by the same code as ``vbn localize``
+(:mod:`landmark_localizer.evaluation`): accuracy by ``evo_ape`` (and ours beside it),
+availability (poses over the images played), region changes by prediction and after a
+loss and the per-frame latency (the node's ``/diagnostics``); ``OUT/trajectory.png``
+shows the estimated and true trajectories over the regions. The last line is
+``PASS`` or ``FAIL`` against the issue's targets for ``room_run`` (accuracy, availability,
+switching; latency on one core is ``vbn bench-localize``'s); the exit code is 0 only on
+PASS.
+
+DDS: the demo runs in its own random ``ROS_DOMAIN_ID`` (unless one is set) with
+localhost discovery, so it neither hears nor disturbs other ROS programs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+import random
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from typing import Any
+
+__all__ = ['register', 'run']
+
+#: Correspondence settings the demo builds with (the builder's defaults cover less of
+#: the room's poses; see docs/localization.md).
+DEMO_BUILD_SETTINGS = ('classes.tau=120', 'classes.symmetry_factor=1')
+RECORDED_TOPICS = ('/localizer/pose', '/localizer/pose_with_covariance', '/localizer/region',
+                   '/ground_truth/pose', '/diagnostics')
+PLAYED_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed', '/camera/camera_info',
+                 '/odom', '/ground_truth/pose')
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``demo`` subcommand."""
+    parser = subparsers.add_parser(
+        'demo', help='build, localize the sample run over DDS, evaluate: PASS or FAIL',
+        description='Build the database of bags/room_exploration, start the localizer node, '
+                    'play bags/room_run to it over DDS, record what it publishes and print '
+                    'accuracy (evo_ape), availability, switching and latency, with a PNG of '
+                    'the trajectories over the regions; ends with PASS or FAIL.')
+    parser.add_argument('--out', default='out/demo', help='output folder (out/demo)')
+    parser.add_argument('--exploration', default='bags/room_exploration',
+                        help='exploration bag (bags/room_exploration)')
+    parser.add_argument('--run', default='bags/room_run', help='run bag (bags/room_run)')
+    parser.add_argument('--db', default=None,
+                        help='use this database instead of building OUT/room.db')
+    parser.add_argument('--build-set', action='append', default=None, metavar='NAME=VALUE',
+                        help='vbn build --set (repeatable; default '
+                             + ' '.join(DEMO_BUILD_SETTINGS) + ')')
+    parser.add_argument('--scene', default='room', help='scene drawn under the trajectories')
+    parser.add_argument('--rate', type=float, default=1.0, help='playback rate (1.0)')
+    parser.add_argument('--timeout', type=float, default=180.0,
+                        help='seconds to wait for the node and the recorder to start')
+    parser.set_defaults(func=run)
+
+
+class _Process:
+    """A child process with its output in a log file, stopped by SIGINT then SIGKILL."""
+
+    def __init__(self, name: str, argv: list[str], env: dict[str, str], log: Path) -> None:
+        self.name = name
+        self.log = log
+        self._stream = log.open('w')
+        self.popen = subprocess.Popen(argv, env=env, stdout=self._stream,
+                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                      start_new_session=True)
+
+    def output(self) -> str:
+        return self.log.read_text(errors='replace')
+
+    def wait_for(self, text: str, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.output():
+                return True
+            if self.popen.poll() is not None:
+                return text in self.output()
+            time.sleep(0.2)
+        return False
+
+    def stop(self, timeout: float = 20.0) -> int | None:
+        if self.popen.poll() is None:
+            self.popen.send_signal(signal.SIGINT)
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.popen.kill()
+                self.popen.wait(5)
+        self._stream.close()
+        return self.popen.returncode
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ, PYTHONUNBUFFERED='1')
+    env.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 101)))
+    env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return env
+
+
+def _vbn() -> list[str]:
+    return [sys.executable, '-m', 'landmark_db.cli.main']
+
+
+def _step(text: str) -> float:
+    print(f'== {text}', flush=True)
+    return time.perf_counter()
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the demo; 0 on PASS, 1 on FAIL."""
+    from landmark_localizer.errors import LocalizerError
+
+    start = time.perf_counter()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    env = _env()
+    print(f'vbn demo: output in {out}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, localhost '
+          'discovery', flush=True)
+    if args.db:
+        db = Path(args.db)
+        if not db.is_file():
+            raise LocalizerError(f'database {db} does not exist')
+    else:
+        db = out / 'room.db'
+        t = _step(f'1/5 build the database of {args.exploration}')
+        argv = _vbn() + ['build', args.exploration, '--db', str(db), '--quiet']
+        for item in (args.build_set if args.build_set is not None else DEMO_BUILD_SETTINGS):
+            argv += ['--set', item]
+        with (out / 'build.log').open('w') as log:
+            done = subprocess.run(argv, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                  check=False)
+        if done.returncode != 0:
+            raise LocalizerError(f'vbn build failed (exit {done.returncode}); see '
+                                 f'{out / "build.log"}')
+        print(f'   {db} ({db.stat().st_size / 1e6:.2f} MB) in {time.perf_counter() - t:.0f} s')
+    recorded = out / 'recorded'
+    if recorded.exists():
+        shutil.rmtree(recorded)  # this demo's own previous recording
+    executable = shutil.which('localizer', path=env.get('PATH'))
+    if executable is None:
+        raise LocalizerError('the localizer node is not installed (run make setup)')
+    processes: list[_Process] = []
+    try:
+        t = _step('2/5 start the localizer node')
+        node = _Process('localizer', [executable, '--ros-args', '-p', f'db:={db}'], env,
+                        out / 'localizer.log')
+        processes.append(node)
+        if not node.wait_for('localizer ready', args.timeout):
+            raise LocalizerError(f'the localizer did not start; see {node.log}')
+        print(f'   ready in {time.perf_counter() - t:.0f} s')
+        _step('3/5 record ' + ' '.join(RECORDED_TOPICS))
+        recorder = _Process('record', _vbn() + ['record', '--topics', *RECORDED_TOPICS,
+                                                '--out', str(recorded)], env,
+                            out / 'record.log')
+        processes.append(recorder)
+        if not recorder.wait_for('recording /localizer/region', args.timeout):
+            raise LocalizerError(f'the recorder did not subscribe; see {recorder.log}')
+        t = _step(f'4/5 play {args.run} to the node over DDS')
+        topics = _played_topics(Path(args.run))
+        with (out / 'play.log').open('w') as log:
+            played = subprocess.run(
+                _vbn() + ['play', args.run, '--wait-for-subscribers', '--wait-timeout',
+                          str(args.timeout), '--rate', str(args.rate), '--topics', *topics],
+                stdout=log, stderr=subprocess.STDOUT, env=env, check=False)
+        if played.returncode != 0:
+            raise LocalizerError(f'vbn play failed (exit {played.returncode}); see '
+                                 f'{out / "play.log"}')
+        time.sleep(2.5)  # the last frame's pose and one more /diagnostics (1 Hz)
+        print(f'   played in {time.perf_counter() - t:.0f} s')
+        recorder.stop()
+        node.stop()
+    finally:
+        for process in reversed(processes):
+            process.stop()
+    _step('5/5 evaluate the recording')
+    passed = evaluate_demo(out, recorded, db, Path(args.run), args.scene)
+    print(f'(demo took {time.perf_counter() - start:.0f} s)')
+    print('PASS' if passed else 'FAIL', flush=True)
+    return 0 if passed else 1
+
+
+def _played_topics(run_bag: Path) -> list[str]:
+    from landmark_localizer.errors import LocalizerError
+    from visibility_builder.bags import open_bag
+    from visibility_builder.errors import VisibilityBuilderError
+
+    try:
+        with open_bag(run_bag) as bag:
+            return [t for t in PLAYED_TOPICS if t in bag.topics]
+    except VisibilityBuilderError as error:
+        raise LocalizerError(str(error)) from None
+
+
+def evaluate_demo(out: Path, recorded: Path, db: Path, run_bag: Path, scene: str) -> bool:
+    """Evaluate a recording of the node; print the table; write the PNG and JSON.
+
+    Args:
+        out: Output folder (``trajectory.png``, ``results.json``).
+        recorded: The recorded bag.
+        db: The database localized against.
+        run_bag: The bag played (its images are the frames).
+        scene: Scene name or file drawn under the trajectories ('' for none).
+
+    Returns:
+        Whether every target is met.
+    """
+    from dataclasses import replace
+    import math
+
+    import numpy as np
+
+    from landmark_db.database import open_database
+    from landmark_localizer.evaluation import (
+        Latency,
+        RegionChanges,
+        associate,
+        check_run,
+        count_region_changes,
+        evaluate_run,
+        evo_ape,
+        format_checks,
+        format_evaluation,
+    )
+    from landmark_localizer.plots import save_trajectory_figure
+    from landmark_localizer.pose_bags import read_pose_bag, read_run_bag
+
+    bag = read_pose_bag(recorded)
+    played = read_run_bag(run_bag)
+    frames = np.sort(played.stamps_ns)
+    frame_poses = np.full((len(frames), 3), np.nan)
+    rows, pose_rows = associate(frames, bag.pose_stamps_ns, 0.001)
+    frame_poses[rows] = bag.poses[pose_rows]
+    truth_stamps = bag.truth_stamps_ns if len(bag.truth_stamps_ns) else played.truth_stamps_ns
+    truth_poses = bag.truth_poses if len(bag.truth_stamps_ns) else played.truth_poses
+    regions = np.where(np.isfinite(frame_poses).all(axis=1), 0, -1)
+    evaluation = evaluate_run(frames, regions, frame_poses, truth_stamps, truth_poses)
+    from_topic = count_region_changes(bag.regions)
+    diag = bag.diagnostics[-1] if bag.diagnostics else {}
+
+    def number(key: str) -> float:
+        try:
+            return float(diag[key])
+        except (KeyError, ValueError):
+            return math.nan
+
+    changes = from_topic
+    if diag:
+        changes = RegionChanges(int(number('predicted_switches')),
+                                int(number('switches_after_loss')))
+        ms = 1e-3
+        latency = Latency(number('latency_p50_ms') * ms, number('latency_p95_ms') * ms,
+                          math.nan, math.nan, math.nan, math.nan, 0, 0)
+        evaluation = replace(evaluation, latency=latency,
+                             falls_to_lost=int(number('falls_to_lost')))
+    evaluation = replace(evaluation, changes=changes, evo=evo_ape(recorded)
+                         if len(bag.poses) and len(bag.truth_stamps_ns) else None)
+    print(format_evaluation(evaluation, f'{run_bag} through the localizer node over DDS '
+                                        f'({len(frames)} images played):'))
+    print(f'  /localizer/region {len(bag.regions)} messages; changes seen there: '
+          f'{from_topic.predicted} direct, {from_topic.after_loss} after LOST')
+    if diag:
+        print(f'  node diagnostics  frames received {diag.get("frames_received")}, processed '
+              f'{diag.get("frames_processed")}, dropped {diag.get("frames_dropped")}; '
+              f'latency over the last {min(200, int(number("frames_processed") or 0))} '
+              f'frames p50 {number("latency_p50_ms"):.1f} ms, p95 '
+              f'{number("latency_p95_ms"):.1f} ms, max {number("latency_max_ms"):.1f} ms')
+    scene_obj = None
+    if scene:
+        from visibility_builder.scenes import resolve_scene
+        scene_obj = resolve_scene(scene)
+    png = save_trajectory_figure(out / 'trajectory.png', open_database(db), truth_stamps,
+                                 truth_poses, bag.pose_stamps_ns, bag.poses, frames, scene_obj,
+                                 title=f'{run_bag.name}: localizer node (dots) and ground truth '
+                                       f'(line) over the regions of {db.name}')
+    print(f'  figure            {png}')
+    checks = check_run(evaluation)
+    print(format_checks(checks, "against the issue's targets for room_run:"))
+    results = evaluation.as_dict()
+    results['diagnostics'] = diag
+    results['checks'] = [{'name': c.name, 'value': c.value, 'limit': c.limit,
+                          'passed': c.passed} for c in checks]
+    (out / 'results.json').write_text(json.dumps(results, indent=1, default=str))
+    return all(c.passed for c in checks)

@@ -1,0 +1,88 @@
+"""Figure of a localizer run: estimated and true trajectories over the regions.
+
+The database's decomposition is drawn by :func:`landmark_db.plotting.draw_decomposition`
+(regions in colour over the pose grid, and the scene's walls and obstacles when the
+scene is known); over it, the ground truth as a black line, the published poses as
+dots coloured by their position error, and the frames without a pose as grey crosses
+at their true position. Uses matplotlib's Agg backend.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from landmark_db.database import LandmarkDatabase
+from landmark_localizer.evaluation import associate, find_teleports
+
+__all__ = ['save_trajectory_figure']
+
+
+def save_trajectory_figure(path: str | os.PathLike[str], database: LandmarkDatabase,
+                           truth_stamps_ns: np.ndarray, truth_poses: np.ndarray,
+                           pose_stamps_ns: np.ndarray, poses: np.ndarray,
+                           frame_stamps_ns: np.ndarray | None = None, scene: Any = None,
+                           title: str = '', dpi: int = 110) -> Path:
+    """Draw the run over the database's regions into a PNG file.
+
+    Args:
+        path: PNG file to write.
+        database: The landmark database localized against.
+        truth_stamps_ns: (m,) sorted ground-truth stamps.
+        truth_poses: (m, 3) ground truth.
+        pose_stamps_ns: (p,) stamps of the published poses.
+        poses: (p, 3) published poses.
+        frame_stamps_ns: (n,) every frame's stamp, to mark those without a pose.
+        scene: The polygon scene (``visibility_builder.scenes.resolve_scene``) or None.
+        title: Figure title.
+        dpi: Resolution.
+
+    Returns:
+        The path written.
+    """
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    from landmark_db.plotting import draw_decomposition
+
+    truth = np.asarray(truth_poses, float).reshape(-1, 3)
+    est = np.asarray(poses, float).reshape(-1, 3)
+    fig, ax = plt.subplots(figsize=(9, 6))
+    try:
+        draw_decomposition(ax, database.to_world_instance(),
+                           [r.poses for r in database.regions], database.info.k,
+                           database.uncovered, scene=scene, title=title)
+        if len(truth):
+            # A teleport (kidnapping) breaks the line rather than drawing a jump.
+            line = np.insert(truth[:, :2], find_teleports(truth_stamps_ns, truth), np.nan,
+                             axis=0)
+            ax.plot(line[:, 0], line[:, 1], '-', color='black', linewidth=1.0, zorder=7,
+                    label='ground truth')
+        if len(est):
+            rows, truth_rows = associate(pose_stamps_ns, truth_stamps_ns)
+            error = np.full(len(est), np.nan)
+            error[rows] = np.linalg.norm(est[rows, :2] - truth[truth_rows, :2], axis=1)
+            dots = ax.scatter(est[:, 0], est[:, 1], c=np.nan_to_num(error * 100, nan=0.0),
+                              cmap='viridis', vmin=0.0, vmax=5.0, s=7, zorder=8,
+                              label='localizer')
+            fig.colorbar(dots, ax=ax, shrink=0.6, label='position error (cm)')
+        if frame_stamps_ns is not None and len(truth):
+            frames = np.asarray(frame_stamps_ns, np.int64)
+            with_pose, _ = associate(frames, np.sort(np.asarray(pose_stamps_ns, np.int64)),
+                                     0.001)
+            missing = np.setdiff1d(np.arange(len(frames)), with_pose)
+            rows, truth_rows = associate(frames[missing], truth_stamps_ns)
+            if len(rows):
+                ax.scatter(truth[truth_rows, 0], truth[truth_rows, 1], marker='x', s=20,
+                           c='grey', zorder=9, label=f'no pose ({len(missing)} frames)')
+        ax.legend(loc='upper right', fontsize=7)
+        fig.tight_layout()
+        path = Path(path)
+        fig.savefig(path, dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path
