@@ -1,5 +1,11 @@
-"""Algorithm 6.3 (visibility_builder.classes): one hand-built case per rule of Figure 6.3."""
+"""Algorithm 6.3 (visibility_builder.classes): one hand-built case per rule of Figure 6.3.
+
+Tests of a rule as Figure 6.3 prints it use ``exclusion='class'``; the default,
+feature exclusion, has tests of its own.
+"""
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -43,7 +49,8 @@ def test_non_symmetric_match_within_tau_excludes_both_classes():
     # f0 -> g (8 <= tau) but g's nearest neighbour in pose 0 is f1 (2): broken symmetry.
     pose0 = np.vstack([feats(0.0, 10.0), feats(0.0, axis=2) + 300])
     pose1 = np.vstack([feats(8.0), feats(1.0, axis=2) + 300])
-    result = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=9, gamma=1))
+    result = correspondence_classes([pose0, pose1], path(2),
+                                    ClassConfig(tau=9, gamma=1, exclusion='class'))
     assert result.labels[0].tolist()[:2] == [-1, -1]   # f0 and f1 (f1 ~ g, excluded)
     assert result.labels[1].tolist()[0] == -1           # g
     assert result.n_classes == 1                        # the unrelated pair survives
@@ -51,10 +58,44 @@ def test_non_symmetric_match_within_tau_excludes_both_classes():
     assert result.stats['excluded_symmetry'] >= 2
 
 
+def test_feature_exclusion_drops_only_the_ambiguous_features():
+    # The same case with the default: f0 and g are excluded, f1 (whose class g
+    # would have joined) stays as a class of one pose, the unrelated pair merges.
+    pose0 = np.vstack([feats(0.0, 10.0), feats(0.0, axis=2) + 300])
+    pose1 = np.vstack([feats(8.0), feats(1.0, axis=2) + 300])
+    result = correspondence_classes([pose0, pose1], path(2),
+                                    ClassConfig(tau=9, gamma=1, exclusion='feature'))
+    assert result.labels[0][0] == -1 and result.labels[1][0] == -1
+    assert result.labels[0][1] >= 0
+    assert result.labels[0][2] == result.labels[1][1] >= 0
+    assert result.n_classes == 2
+    assert result.stats['excluded_symmetry'] == 2        # f0 and g, each alone
+
+
+def test_feature_exclusion_keeps_a_long_class_with_one_ambiguous_view():
+    # One scene feature tracked along 6 poses; pose 3 also sees a near-copy of it
+    # (3.9 from its own member, tau 4): a repeated pattern that breaks symmetry there.
+    poses = [np.vstack([feats(1.0 * i), feats(0.0, axis=3) + 500]) for i in range(6)]
+    poses[3] = np.vstack([feats(3.0), feats(3.0) + 3.9 * np.eye(1, DIM, 1, dtype=np.float32),
+                          feats(0.0, axis=3) + 500])
+    config = ClassConfig(tau=4, gamma=2, symmetry_factor=1.0)
+    whole = correspondence_classes(poses, path(6), replace(config, exclusion='class'))
+    kept = correspondence_classes(poses, path(6), replace(config, exclusion='feature'))
+    # Figure 6.3 loses the tracked feature at every pose; feature exclusion drops
+    # the two look-alikes of pose 3 and keeps the track as one class of 5 poses
+    # (poses 2 and 4 are within gamma).
+    assert all(lab[0] == -1 for lab in whole.labels)
+    assert kept.labels[3][:2].tolist() == [-1, -1]
+    tracked = {int(lab[0]) for v, lab in enumerate(kept.labels) if v != 3}
+    assert len(tracked) == 1 and min(tracked) >= 0
+    assert int(kept.visibility[:, min(tracked)].sum()) == 5
+
+
 def test_non_symmetric_neighbour_beyond_tau_is_ignored():
     pose0 = feats(0.0, 10.0)
     pose1 = feats(8.0)
-    literal = ClassConfig(tau=7, gamma=1, symmetry_factor=1.0)   # Figure 6.3 as printed
+    literal = ClassConfig(tau=7, gamma=1, symmetry_factor=1.0,
+                          exclusion='class')                  # Figure 6.3 as printed
     result = correspondence_classes([pose0, pose1], path(2), literal)
     # f0 -> g is 8 > tau: no relation; f1 <-> g merge.
     assert result.n_classes == 2
@@ -68,7 +109,8 @@ def test_symmetry_factor_widens_the_exclusion_radius_only():
     pose1 = feats(8.0)
     # f0 -> g is 8: beyond tau (7) but within 1.5 tau: symmetry broken, all excluded.
     wide = correspondence_classes([pose0, pose1], path(2),
-                                  ClassConfig(tau=7, gamma=1, symmetry_factor=1.5))
+                                  ClassConfig(tau=7, gamma=1, symmetry_factor=1.5,
+                                              exclusion='class'))
     assert wide.n_classes == 0 and wide.stats['excluded_symmetry'] == 2
     # A mutual pair between tau and the wider radius neither merges nor excludes.
     apart = correspondence_classes([feats(0.0), feats(9.0)], path(2),
@@ -125,16 +167,19 @@ def test_repeated_pattern_within_one_pose_is_excluded():
     # Pose 0 sees two near-identical features (a tiled wall); pose 1 one of them.
     pose0 = feats(0.0, 3.0)
     pose1 = feats(0.5)
-    same = correspondence_classes([pose0, pose1], path(2), ClassConfig(tau=5, gamma=1))
-    off = correspondence_classes([pose0, pose1], path(2),
-                                 ClassConfig(tau=5, gamma=1, same_pose=False))
+    fig = ClassConfig(tau=5, gamma=1, exclusion='class')
+    same = correspondence_classes([pose0, pose1], path(2), fig)
+    off = correspondence_classes([pose0, pose1], path(2), replace(fig, same_pose=False))
     assert same.n_classes == 0
+    # feature exclusion drops the repeats, and g, which is nearest to one of them
+    # without being its mutual neighbour
+    single = correspondence_classes([pose0, pose1], path(2), replace(fig, exclusion='feature'))
+    assert [lab.tolist() for lab in single.labels] == [[-1, -1], [-1]]
     # without the v = w pair, f1 -> g (2.5) is non-symmetric anyway; a repeat that
     # the other pose does not reach is only caught by the same-pose comparison:
     far = [feats(0.0, 3.0), feats(0.0, axis=4) + 300]
-    assert correspondence_classes(far, path(2), ClassConfig(tau=5, gamma=1)).n_classes == 1
-    assert correspondence_classes(far, path(2), ClassConfig(
-        tau=5, gamma=1, same_pose=False)).n_classes == 3
+    assert correspondence_classes(far, path(2), fig).n_classes == 1
+    assert correspondence_classes(far, path(2), replace(fig, same_pose=False)).n_classes == 3
     assert off.n_classes == 0
 
 
@@ -182,10 +227,15 @@ def test_invariants_on_random_worlds_and_workers_agree():
         seen = rng.choice(80, 30, replace=False)
         poses.append(scene[seen] + rng.normal(0, 8, (30, 32)).astype(np.float32))
     edges = np.array([(i, (i + 1) % 12) for i in range(12)])
-    config = ClassConfig(tau=60, gamma=2)
-    one = correspondence_classes(poses, edges, config)
-    two = correspondence_classes(poses, edges, ClassConfig(tau=60, gamma=2, workers=2))
-    assert [a.tolist() for a in one.labels] == [b.tolist() for b in two.labels]
+    for exclusion in ('class', 'feature'):
+        config = ClassConfig(tau=60, gamma=2, exclusion=exclusion)
+        one = correspondence_classes(poses, edges, config)
+        two = correspondence_classes(poses, edges, replace(config, workers=2))
+        assert [a.tolist() for a in one.labels] == [b.tolist() for b in two.labels]
+        check_invariants(one)
+
+
+def check_invariants(one) -> None:
     assert one.n_classes > 10
     ids = np.concatenate(one.labels)
     assert set(ids[ids >= 0].tolist()) == set(range(one.n_classes))
@@ -207,6 +257,7 @@ def test_empty_poses_and_no_edges():
     ({'tau': 0}, 'tau'), ({'gamma': 0}, 'gamma'), ({'ratio': 1.5}, 'ratio'),
     ({'workers': 0}, 'workers'), ({'transitivity': -1.0}, 'transitivity'),
     ({'symmetry_factor': 0.5}, 'symmetry_factor'),
+    ({'exclusion': 'pose'}, "exclusion must be one of feature, class, got 'pose'"),
 ])
 def test_bad_config_is_one_clear_error(kwargs, message):
     with pytest.raises(VisibilityBuilderError, match=message):

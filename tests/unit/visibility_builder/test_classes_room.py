@@ -1,8 +1,10 @@
-"""Algorithm 6.3 and the filters on the rendered room bag, checked against ground truth.
+"""Algorithm 6.3, verification and filters on the rendered room bag, against ground truth.
 
 The renderer knows the wall point behind every keypoint, so each class's purity is
-measured (visibility_builder.purity). The fast test uses a 10 x 6 window of the
-exploration lattice; the bench test the whole bag (200 panoramas).
+measured (visibility_builder.purity). The classes are those of the builder's
+defaults: Algorithm 6.3 (feature exclusion), then the geometric verification. The
+fast test uses a 10 x 6 window of the exploration lattice; the bench test the whole
+bag (200 panoramas).
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from visibility_builder.geometry.camera import make_camera
 from visibility_builder.purity import class_purity, keypoint_wall_points
 from visibility_builder.render.renderer import Renderer
 from visibility_builder.scenes import resolve_scene
+from visibility_builder.verification import VerifyConfig, verify_classes
 
 ROOM = Path(__file__).resolve().parents[3] / 'bags' / 'room_exploration'
 
@@ -32,6 +35,7 @@ class RoomData:
     sizes: list[np.ndarray]
     wall_points: list[np.ndarray]
     poses: np.ndarray
+    camera_poses: np.ndarray
     grid: np.ndarray
     edges: np.ndarray
 
@@ -62,7 +66,15 @@ def load_room(window: tuple[int, int] | None) -> RoomData:
         sizes=[f.sizes for f in features],
         wall_points=[keypoint_wall_points(renderer, poses[i], f.keypoints)
                      for i, f in enumerate(features)],
-        poses=poses, grid=sampling.grid[chosen], edges=edges)
+        poses=poses, camera_poses=np.array([exploration.frames[f].camera_pose for f in frames]),
+        grid=sampling.grid[chosen], edges=edges)
+
+
+def default_classes(data: RoomData):
+    """Algorithm 6.3 and the geometric verification, as the builder runs them."""
+    result = correspondence_classes(data.descriptors, data.edges, ClassConfig())
+    return verify_classes(result, data.keypoints, data.sizes, list(data.camera_poses),
+                          make_camera('panoramic'), VerifyConfig())
 
 
 def purity_of(data: RoomData, labels, min_poses: int):
@@ -90,14 +102,16 @@ def room_window() -> RoomData:
 
 def test_room_window_classes_are_pure_and_widely_visible(room_window):
     data = room_window
-    result = correspondence_classes(data.descriptors, data.edges, ClassConfig())
+    result = default_classes(data)
     kept = retain_good_features(result.visibility, data.grid, data.edges,
                                 FilterConfig(min_poses=9))
     purity = purity_of(data, filtered_labels(result.labels, kept), min_poses=1)
-    # measured: 99 classes, 2 impure (a window's classes are cut at its border)
-    assert purity.n_classes == len(kept.kept_classes) >= 80
-    assert purity.impure_fraction <= 0.03
+    # measured: 229 classes, 1 impure (a window's classes are cut at its border);
+    # without the verification 242, 5 impure
+    assert purity.n_classes == len(kept.kept_classes) >= 180
+    assert purity.impure_fraction <= 0.015
     assert np.median(kept.sizes_after) >= 15
+    assert result.stats['excluded_geometry'] > 0
     # the filters only ever remove
     names = [s.name for s in kept.steps]
     assert names == ['input', 'min_poses', 'largest_component', 'convex_trim', 'min_block']
@@ -107,7 +121,7 @@ def test_room_window_classes_are_pure_and_widely_visible(room_window):
 def test_purity_measure_flags_a_wrong_merge(room_window):
     # The measure itself: relabel one class's features as another class's.
     data = room_window
-    result = correspondence_classes(data.descriptors, data.edges, ClassConfig())
+    result = default_classes(data)
     sizes = np.asarray(result.visibility.sum(axis=0)).ravel()
     big = np.argsort(-sizes)[:2]
     merged = []
@@ -126,12 +140,13 @@ def test_purity_measure_flags_a_wrong_merge(room_window):
 def test_room_bag_purity_and_counts():
     start = time.perf_counter()
     data = load_room(None)
-    result = correspondence_classes(data.descriptors, data.edges, ClassConfig())
+    result = default_classes(data)
     kept = retain_good_features(result.visibility, data.grid, data.edges, FilterConfig())
     purity = purity_of(data, filtered_labels(result.labels, kept), min_poses=1)
     print(f'room: {result.stats}, filters {kept.counts_dict()}, impure '
           f'{purity.n_impure}/{purity.n_classes}, median visibility '
           f'{np.median(kept.sizes_after)}, {time.perf_counter() - start:.1f} s')
-    # measured (docs/classes.md): 202 classes, 1 impure (0.50 %)
-    assert len(kept.kept_classes) >= 180
+    # measured (docs/classes.md): 489 classes, 1 impure (0.20 %); the previous
+    # defaults (class exclusion, tau 100, symmetry factor 2, no verification) 202, 0.50 %
+    assert len(kept.kept_classes) >= 440
     assert purity.impure_fraction <= 0.005

@@ -19,7 +19,8 @@ def textured(seed: int = 0, shape: tuple[int, int] = (120, 160)) -> np.ndarray:
 def test_features_match_opencv_and_descriptors_are_lossless_uint8() -> None:
     image = textured()
     feats = extract_features(image)
-    keypoints, descriptors = cv2.SIFT_create().detectAndCompute(image, None)
+    keypoints, descriptors = cv2.SIFT_create(
+        nOctaveLayers=SiftConfig().n_octave_layers).detectAndCompute(image, None)
     assert len(feats) == len(keypoints) > 20
     assert feats.descriptors.dtype == np.uint8 and feats.descriptors.shape[1] == 128
     # OpenCV's float descriptors are integers in 0..255: the uint8 copy is exact.

@@ -20,6 +20,9 @@ an equivalence:
 * after the closure, a class holding two features of one pose breaks local uniqueness
   (6.3) and is excluded.
 
+With ``exclusion='feature'`` (the default, a departure listed below) a broken
+relation excludes its two features instead of their whole classes.
+
 Every feature starts in a class of its own, so a feature that matched nothing is a
 class seen from one pose (the filters of Section 6.2.2 drop such classes).
 
@@ -34,18 +37,37 @@ Complexity: O(sum over pairs of n_v n_w d) for the distances, O(N) for the rest.
 
 Departures from the text, with reasons:
 
+* **Feature exclusion** (``exclusion='feature'``, the default; ``'class'`` is Figure
+  6.3). Figure 6.3 excludes every member of a class in which one feature takes part
+  in a non-symmetric relation. The widely visible classes that the decomposition
+  needs have the most links, so one ambiguous view anywhere (the feature missed at
+  one pose and its nearest neighbour there some other feature) removes exactly the
+  classes worth keeping: on the room bag 501 classes reach 16 poses with class
+  exclusion (tau 120), 704 with feature exclusion (tau 150). Here the features of a
+  broken relation are excluded before the closure (they merge with nothing, so no
+  chain runs through them) and the rest of their classes stays, which is the
+  thesis's own aim ("discard all the features that are not distinctive enough").
+  Local uniqueness still excludes whole classes. Descriptors alone then leave more
+  mixed classes (2.5 % instead of 0.5-0.9 % on the room bag); the builder's
+  geometric verification (:mod:`visibility_builder.verification`) removes them
+  (0.24 %, ``docs/classes.md``). Splitting a class at its broken relations
+  (excluding the class only when a broken relation joins two of its own members)
+  and excluding a class only when two or more of its members are broken were
+  measured too and kept fewer classes.
+
 * **Pose pairs** v != w are unordered and each is compared once; the nearest
   neighbours of both directions (v -> w and w -> v) come from the same distance
   matrix, which is what the algorithm's loop over ordered pairs computes.
 * **Several images per pose** (four pinhole headings, say) are given as one
   concatenated feature set per pose, as the thesis asks ("integrated into a unique
   panorama").
-* **Two radii** (``symmetry_factor``, 2 by default): pairs merge within tau, but a
+* **Two radii** (``symmetry_factor``, 1 by default): pairs merge within tau, but a
   nearest neighbour that is not mutual already breaks symmetry within
   ``symmetry_factor * tau``. Figure 6.3 uses tau for both; a feature whose nearest
   neighbour is not mutual but slightly beyond tau is just as ambiguous, and on the
-  room bag this is what brings the impure classes to 0.5 % (``docs/classes.md``).
-  ``symmetry_factor=1`` is the algorithm as printed.
+  room bag with class exclusion and no geometric verification this is what brings
+  the impure classes to 0.5 % (``docs/classes.md``). ``symmetry_factor=1`` is the
+  algorithm as printed; with feature exclusion a wider radius only removes features.
 * **The pair v = w** (delta(v, v) = 0 <= gamma) is compared with a feature never its
   own nearest neighbour (``same_pose``, on by default). Read literally, every feature
   is its own nearest neighbour there and the pair teaches nothing; read this way, two
@@ -88,6 +110,7 @@ from scipy.sparse.csgraph import connected_components
 from visibility_builder.errors import VisibilityBuilderError
 
 __all__ = [
+    'EXCLUSIONS',
     'ClassConfig',
     'ClassResult',
     'PairMatches',
@@ -98,6 +121,9 @@ __all__ = [
 ]
 
 logger = logging.getLogger(__name__)
+
+# What a broken relation excludes (ClassConfig.exclusion).
+EXCLUSIONS = ('feature', 'class')
 
 # Most distance-matrix entries per BLAS product (4 MB: small products stay in cache).
 _BLOCK_ENTRIES = 1_000_000
@@ -124,15 +150,19 @@ class ClassConfig:
         transitivity: if set, a class is also excluded when two of its features, seen
             from poses at most ``gamma`` apart, are farther apart than this distance
             (the closure chained them through intermediate poses). ``None``: off.
+        exclusion: what a broken relation excludes: ``'feature'`` its two features
+            (they merge with nothing, their classes stay), ``'class'`` the whole
+            classes of both (Figure 6.3 as printed).
     """
 
-    tau: float = 100.0
+    tau: float = 150.0
     gamma: int = 2
     ratio: float | None = None
     workers: int = 1
     same_pose: bool = True
-    symmetry_factor: float = 2.0
+    symmetry_factor: float = 1.0
     transitivity: float | None = None
+    exclusion: str = 'feature'
 
     def __post_init__(self) -> None:
         if not (isinstance(self.tau, (int, float)) and math.isfinite(self.tau)
@@ -151,6 +181,9 @@ class ClassConfig:
                 and math.isfinite(self.symmetry_factor) and self.symmetry_factor >= 1):
             raise VisibilityBuilderError(
                 f'symmetry_factor must be a number >= 1, got {self.symmetry_factor!r}')
+        if self.exclusion not in EXCLUSIONS:
+            raise VisibilityBuilderError(
+                f'exclusion must be one of {", ".join(EXCLUSIONS)}, got {self.exclusion!r}')
         if self.transitivity is not None and not (
                 isinstance(self.transitivity, (int, float)) and self.transitivity > 0):
             raise VisibilityBuilderError(
@@ -318,6 +351,11 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
                       for v, d in enumerate(descriptors) if len(d) > 1)
     merged = np.concatenate(mutual) if mutual else np.zeros((0, 2), dtype=np.int64)
     broken_ids = np.unique(np.concatenate(broken)) if broken else np.zeros(0, dtype=np.int64)
+    if config.exclusion == 'feature':
+        # The features of a broken relation merge with nothing: no chain runs through them.
+        is_broken = np.zeros(n_features, dtype=bool)
+        is_broken[broken_ids] = True
+        merged = merged[~(is_broken[merged[:, 0]] | is_broken[merged[:, 1]])]
     tested = sum(r[2] for r in results)
     within = sum(r[3] for r in results)
 
@@ -327,7 +365,8 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
     n_components, component = connected_components(graph, directed=False)
     pose_of = np.repeat(np.arange(n_poses, dtype=np.int64), counts)
 
-    # Symmetry: a class holding a feature of a broken relation is excluded.
+    # Symmetry: a class holding a feature of a broken relation is excluded (with
+    # feature exclusion such a feature is a class of its own).
     excluded_sym = np.zeros(n_components, dtype=bool)
     excluded_sym[component[broken_ids]] = True
     # Local uniqueness (6.3): a class with two features of one pose is excluded.

@@ -35,14 +35,16 @@ class SiftConfig:
 
     Attributes:
         n_features: Keep the best ``n_features`` keypoints by response (0: all).
-        n_octave_layers: Layers per octave.
+        n_octave_layers: Layers per octave (Lowe's 3 finds fewer keypoints that stay
+            stable across the 25 cm lattice: 5 gives 17 % more classes on the room bag,
+            docs/classes.md, at the same extraction time).
         contrast_threshold: Rejects weak extrema (higher: fewer keypoints).
         edge_threshold: Rejects edge-like extrema (lower: fewer keypoints).
         sigma: Gaussian of the first octave.
     """
 
     n_features: int = 0
-    n_octave_layers: int = 3
+    n_octave_layers: int = 5
     contrast_threshold: float = 0.04
     edge_threshold: float = 10.0
     sigma: float = 1.6
