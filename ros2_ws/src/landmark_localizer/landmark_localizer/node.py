@@ -7,7 +7,8 @@ the estimate is published.
 Subscribes:
     ``/camera/image_raw`` (``sensor_msgs/Image``) and ``/camera/image_raw/compressed``
     (``sensor_msgs/CompressedImage``), sensor-data QoS with depth 1: frames that arrive
-    while one is processed replace each other, never queue; ``/camera/camera_info``
+    while one is processed replace each other, never queue (``image_reliable`` makes
+    them reliable, for raw images over 0.5 MB); ``/camera/camera_info``
     (checked against the database's camera); ``/odom`` (``nav_msgs/Odometry``,
     optional); ``/initialpose`` (``geometry_msgs/PoseWithCovarianceStamped``, as nav2's
     AMCL: voting is restricted to regions near it).
@@ -62,6 +63,10 @@ IMAGE_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed')
 RESET_BACK_NS = 1_000_000_000
 #: Odometry is extrapolated at most this far past its newest message.
 ODOM_MAX_EXTRAPOLATION_S = 0.1
+#: An image newer than the newest odometry waits at most this long for the odometry of
+#: its stamp (which arrives on another topic, often a moment later), as tf2's message
+#: filter waits for a transform.
+ODOM_WAIT_S = 0.05
 #: Frames in the latency window of /diagnostics.
 LATENCY_WINDOW = 200
 #: Images without any CameraInfo before the node says it uses the database's camera.
@@ -86,6 +91,9 @@ class NodeSettings:
         base_frame_id: The robot's frame.
         odom_max_jump_m: Consecutive odometry poses further apart than this are a jump:
             the odometry history restarts.
+        image_reliable: Subscribe to the images reliable (still depth 1) instead of best
+            effort; for raw images over 0.5 MB, which Fast DDS drops between processes when
+            best effort (rmw_fastrtps issue 739); needs a reliable publisher.
     """
 
     db: str = ''
@@ -96,6 +104,7 @@ class NodeSettings:
     odom_frame_id: str = 'odom'
     base_frame_id: str = 'base_link'
     odom_max_jump_m: float = 1.0
+    image_reliable: bool = False
 
     def __post_init__(self) -> None:
         for name in ('transform_tolerance', 'transform_publish_period', 'odom_max_jump_m'):
@@ -238,9 +247,6 @@ def _make_node() -> Any:
     from visibility_builder.ros_tools.tf_broadcast import TransformBroadcaster
     from visibility_builder.transforms import StampedTransform, correction
 
-    frame_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                           reliability=ReliabilityPolicy.BEST_EFFORT,
-                           durability=DurabilityPolicy.VOLATILE)
 
     class LocalizerNode(Node):
         """Declares the parameters, opens the database, localizes each image."""
@@ -256,6 +262,7 @@ def _make_node() -> Any:
             self.warnings = Warnings(self.log.warning)
             self.stats = FrameStats()
             self.lock = threading.Lock()  # odometry, camera info, transform
+            self.odom_arrived = threading.Condition(self.lock)
             self.odometry = OdometryBuffer(max_jump_m=self.settings.odom_max_jump_m,
                                            max_extrapolation_s=ODOM_MAX_EXTRAPOLATION_S)
             self.odom_restarted = False
@@ -266,6 +273,10 @@ def _make_node() -> Any:
             self.transform: StampedTransform | None = None
             self.estimate = None
 
+            frame_qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST, depth=1, durability=DurabilityPolicy.VOLATILE,
+                reliability=ReliabilityPolicy.RELIABLE if self.settings.image_reliable else
+                ReliabilityPolicy.BEST_EFFORT)
             frames = MutuallyExclusiveCallbackGroup()
             inputs = MutuallyExclusiveCallbackGroup()
             self.pose_pub = self.create_publisher(PoseStamped, '/localizer/pose', 10)
@@ -342,6 +353,7 @@ def _make_node() -> Any:
                 result = self.odometry.add(stamp, pose)
                 if result != ACCEPTED:
                     self.odom_restarted = True
+                self.odom_arrived.notify_all()
             if result == JUMP:
                 self.warnings.warn('odom_jump', f'/odom jumped by more than '
                                    f'{self.settings.odom_max_jump_m:g} m: odometry history '
@@ -399,6 +411,8 @@ def _make_node() -> Any:
             try:
                 self._process(msg, start)
             except Exception as error:  # noqa: BLE001 - a node reports, it does not die
+                if not self.context.ok():
+                    return  # shutting down: the publishers are gone
                 self._drop('error', f'{type(error).__name__}: {error}'.splitlines()[0])
 
         def _process(self, msg: Any, start: float) -> None:
@@ -420,7 +434,7 @@ def _make_node() -> Any:
                 problem, seen = self.camera_problem, self.camera_info_seen
                 restarted, self.odom_restarted = self.odom_restarted, False
             if problem:
-                self._drop('camera_info', problem)
+                self.stats.drop('camera_info')  # said once when the CameraInfo came
                 return
             if not seen and self.stats.received == CAMERA_INFO_GRACE:
                 self.warnings.warn('no_camera_info', 'no CameraInfo on /camera/camera_info: '
@@ -436,8 +450,7 @@ def _make_node() -> Any:
                 self._drop('size', f'image is {image.shape[1]}x{image.shape[0]}, the '
                            f'database camera {shape[1]}x{shape[0]}')
                 return
-            with self.lock:
-                odom = self.odometry.at(stamp)
+            odom = self._odometry_at(stamp)
             if restarted:
                 self.localizer.predictor.reset()
             self.last_stamp = stamp
@@ -446,6 +459,18 @@ def _make_node() -> Any:
             self.stats.processed += 1
             self._publish(estimate, odom)
             self.stats.latency.append(time.perf_counter() - start)
+
+        def _odometry_at(self, stamp: int) -> np.ndarray | None:
+            def arrived() -> bool:
+                latest = self.odometry.latest_stamp
+                return latest is None or latest >= stamp
+
+            with self.odom_arrived:
+                latest = self.odometry.latest_stamp
+                if latest is not None and 0 < stamp - latest <= \
+                        ODOM_MAX_EXTRAPOLATION_S * 1e9:
+                    self.odom_arrived.wait_for(arrived, timeout=ODOM_WAIT_S)
+                return self.odometry.at(stamp)
 
         def _publish(self, estimate: Any, odom: np.ndarray | None) -> None:
             self.region_pub.publish(Int32(data=int(estimate.region)))

@@ -1,0 +1,541 @@
+"""The localizer node over real DDS: the sample runs, the kidnapped run and bad input.
+
+The room database is built once per session from ``bags/room_exploration``. The node
+runs as ``localizer`` (the executable ``ros2 run`` starts) in a subprocess on this test
+run's domain; the test process listens (and publishes bad input) with an in-process
+rclpy node. Accuracy is checked against the ground truth recorded in the bags.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+import sqlite3
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from landmark_db.database import SCHEMA_VERSION, open_database
+from visibility_builder.bags import open_bag
+from visibility_builder.geometry.frames import quaternion_yaw
+from visibility_builder.images import decode_image
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+BAGS = ROOT / 'bags'
+WAIT = 120.0
+IMAGE_TOPIC = '/camera/image_raw/compressed'
+
+
+@pytest.fixture(scope='session')
+def room_db(tmp_path_factory) -> Path:
+    db = tmp_path_factory.mktemp('localizer_db') / 'room.db'
+    proc = subprocess.run(['vbn', 'build', str(BAGS / 'room_exploration'), '--db', str(db),
+                           '--set', 'classes.tau=120', '--set', 'classes.symmetry_factor=1',
+                           '--quiet'], capture_output=True, text=True, timeout=900)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return db
+
+
+def read_run(name: str) -> dict:
+    """Image stamps, ground truth and odometry of a run bag, by stamp."""
+    truth, odom, images, infos = {}, {}, [], []
+    with open_bag(BAGS / name) as reader:
+        for topic, msgtype, stamp, raw in reader.messages():
+            if topic == '/ground_truth/pose':
+                msg = reader.deserialize(raw, msgtype)
+                truth[stamp] = (msg.pose.position.x, msg.pose.position.y)
+            elif topic == '/odom':
+                msg = reader.deserialize(raw, msgtype)
+                q = msg.pose.pose.orientation
+                odom[stamp] = (msg.pose.pose.position.x, msg.pose.pose.position.y,
+                               float(quaternion_yaw(np.array([q.x, q.y, q.z, q.w]))))
+            elif topic == IMAGE_TOPIC:
+                images.append((stamp, reader.deserialize(raw, msgtype)))
+            elif topic == '/camera/camera_info':
+                infos.append(reader.deserialize(raw, msgtype))
+    return {'truth': truth, 'odom': odom, 'images': images, 'info': infos[0]}
+
+
+def stamp_ns(stamp) -> int:
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class Listener:
+    """Everything the localizer publishes, as the test node hears it."""
+
+    def __init__(self, ros_node) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+        from std_msgs.msg import Int32
+        from tf2_msgs.msg import TFMessage
+        from visualization_msgs.msg import MarkerArray
+
+        from visibility_builder.ros_tools.markers import LATCHED_QOS
+        from visibility_builder.ros_tools.tf_broadcast import DYNAMIC_QOS
+
+        self.ros = ros_node
+        node = ros_node.node
+        self.poses: list = []
+        self.poses_cov: list = []
+        self.regions: list[int] = []
+        self.tf: list = []
+        self.diagnostics: list = []
+        self.markers: list = []
+        node.create_subscription(PoseStamped, '/localizer/pose', self.poses.append, 100)
+        node.create_subscription(PoseWithCovarianceStamped, '/localizer/pose_with_covariance',
+                                 self.poses_cov.append, 100)
+        node.create_subscription(Int32, '/localizer/region',
+                                 lambda m: self.regions.append(m.data), 100)
+        node.create_subscription(TFMessage, '/tf', self._on_tf, DYNAMIC_QOS)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+        node.create_subscription(MarkerArray, '/localizer/regions', self.markers.append,
+                                 LATCHED_QOS)
+
+    def _on_tf(self, msg) -> None:
+        self.tf.extend(t for t in msg.transforms if t.header.frame_id == 'map')
+
+    def status(self) -> dict[str, str]:
+        """The newest localizer diagnostics as a dict."""
+        status = [s for s in self.diagnostics[-1].status if s.name == 'localizer'][0]
+        return {kv.key: kv.value for kv in status.values}
+
+    def wait_status(self, predicate, timeout: float = 30.0) -> dict[str, str]:
+        count = len(self.diagnostics)
+        assert self.ros.spin_until(lambda: len(self.diagnostics) > count and
+                                   predicate(self.status()), timeout), \
+            self.status() if self.diagnostics else 'no diagnostics'
+        return self.status()
+
+
+def start_localizer(start_process, db: Path, *params: str):
+    args = [a for p in params for a in ('-p', p)]
+    node = start_process(['localizer', '--ros-args', '-p', f'db:={db}', *args],
+                         name='localizer')
+    node.wait_for_output('localizer ready', timeout=WAIT)
+    return node
+
+
+def play(start_process, ros_node, bag: str, *options: str):
+    # The listener subscribes to every recorded topic, so --wait-for-subscribers starts the
+    # playback only once the localizer and the listener are both connected. The listener
+    # spins meanwhile, so that it hears everything.
+    proc = start_process(['vbn', 'play', str(BAGS / bag), '--wait-for-subscribers',
+                          '--wait-timeout', str(WAIT), *options], name='play')
+    assert ros_node.spin_until(lambda: proc.popen.poll() is not None, timeout=3 * WAIT)
+    assert proc.wait() == 0, proc.output
+    return proc
+
+
+def listen_to_bag_topics(ros_node) -> None:
+    """Subscribe to the bag topics the localizer does not use (for --wait-for-subscribers)."""
+    from geometry_msgs.msg import PoseStamped
+    from tf2_msgs.msg import TFMessage
+
+    from visibility_builder.ros_tools.tf_broadcast import STATIC_QOS
+    ros_node.node.create_subscription(PoseStamped, '/ground_truth/pose', lambda m: None, 10)
+    ros_node.node.create_subscription(TFMessage, '/tf_static', lambda m: None, STATIC_QOS)
+
+
+def pose_errors(listener: Listener, truth: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(stamps, position errors) of the poses received."""
+    stamps = np.array([stamp_ns(p.header.stamp) for p in listener.poses])
+    errors = np.array([math.hypot(p.pose.position.x - truth[s][0],
+                                  p.pose.position.y - truth[s][1])
+                       for p, s in zip(listener.poses, stamps, strict=True)])
+    return stamps, errors
+
+
+def planar(transform) -> np.ndarray:
+    t, q = transform.transform.translation, transform.transform.rotation
+    return np.array([t.x, t.y, float(quaternion_yaw(np.array([q.x, q.y, q.z, q.w])))])
+
+
+def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
+
+
+def spin_for(ros_node, seconds: float) -> None:
+    ros_node.spin_until(lambda: False, timeout=seconds)
+
+
+def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
+                                                       ros_node) -> None:
+    run = read_run('room_run')
+    node = start_localizer(start_process, room_db)
+    listener = Listener(ros_node)
+    listen_to_bag_topics(ros_node)
+    started = time.monotonic()
+    play(start_process, ros_node, 'room_run', '--rate', '2')
+    elapsed = time.monotonic() - started
+    spin_for(ros_node, 1.5)
+    assert node.popen.poll() is None, node.output
+
+    # Poses in map with the images' stamps, close to the ground truth, never NaN.
+    image_stamps = {s for s, _ in run['images']}
+    assert len(listener.poses) >= 0.6 * len(image_stamps), (len(listener.poses), node.output)
+    assert {p.header.frame_id for p in listener.poses} == {'map'}
+    stamps, errors = pose_errors(listener, run['truth'])
+    assert set(stamps) <= image_stamps
+    assert np.all(np.diff(stamps) > 0)
+    assert np.median(errors) < 0.1 and np.percentile(errors, 95) < 0.3, np.percentile(
+        errors, [50, 95, 100])
+    cov = np.array([m.pose.covariance for m in listener.poses_cov])
+    assert np.all(np.isfinite(cov)) and np.all(cov[:, [0, 7, 35]] > 0)
+    # A region most of the time (-1 only while LOST).
+    regions = np.array(listener.regions)
+    assert len(regions) >= len(listener.poses) and np.mean(regions >= 0) > 0.9
+
+    # map -> odom on /tf: with the odometry at the image stamp it gives the pose.
+    assert listener.tf and {(t.header.frame_id, t.child_frame_id) for t in listener.tf} == \
+        {('map', 'odom')}
+    # (The transform republished between frames carries the newest odometry's stamp, so
+    # a stamp may come twice: one of them is the frame's own correction.)
+    by_stamp = {stamp_ns(p.header.stamp): p for p in listener.poses}
+    offsets: dict[int, list[float]] = {}
+    for transform in listener.tf:
+        image_stamp = stamp_ns(transform.header.stamp) - 100_000_000  # transform_tolerance
+        if image_stamp in by_stamp and image_stamp in run['odom']:
+            base = compose(planar(transform), np.array(run['odom'][image_stamp]))
+            p = by_stamp[image_stamp].pose.position
+            offsets.setdefault(image_stamp, []).append(math.hypot(base[0] - p.x,
+                                                                  base[1] - p.y))
+    # Exact where the odometry of the image's stamp had arrived (the node waits 50 ms for
+    # it); otherwise extrapolated from the newest two messages.
+    mins = np.array([min(v) for v in offsets.values()])
+    assert np.mean(mins < 1e-6) > 0.95 and mins.max() < 0.05, np.percentile(mins, [50, 99])
+    checked = len(offsets)
+    assert checked >= 0.5 * len(listener.poses)
+
+    # Region markers, latched: a subscriber that joins late still gets them.
+    assert ros_node.spin_until(lambda: listener.markers, timeout=10)
+    regions_markers = [m for m in listener.markers[0].markers if m.ns == 'regions']
+    assert len(regions_markers) == open_database(room_db).n_regions
+    assert {m.header.frame_id for m in regions_markers} == {'map'}
+
+    status = listener.wait_status(lambda s: True)
+    assert status['state'] == 'TRACKING' and int(status['region']) >= 0
+    assert int(status['frames_processed']) >= len(listener.poses)
+    assert float(status['latency_p50_ms']) > 0 and float(status['latency_p95_ms']) < 1000
+    assert int(status['predicted_switches']) > 0 and status['odometry'] == 'yes'
+    assert status['camera_info'] == 'matches'
+    for key in ('tracked', 'falls_to_lost', 'switches_after_loss', 'frames_dropped'):
+        assert key in status
+    print(f'room_run at rate 2 in {elapsed:.1f} s: {len(listener.poses)} poses of '
+          f'{len(image_stamps)} images, p50 {status["latency_p50_ms"]} ms, p95 '
+          f'{status["latency_p95_ms"]} ms, error median {np.median(errors):.3f} m')
+
+    # AMCL's service: forget the region; the diagnostics then say LOST.
+    from std_srvs.srv import Empty
+    client = ros_node.node.create_client(Empty, '/localizer/reinitialize_global_localization')
+    assert ros_node.spin_until(client.service_is_ready, timeout=WAIT)
+    future = client.call_async(Empty.Request())
+    assert ros_node.spin_until(future.done, timeout=WAIT)
+    assert listener.wait_status(lambda s: s['state'] == 'LOST')['region'] == '-1'
+    assert 'Traceback' not in node.output
+
+
+def test_kidnapped_run_with_sim_time(room_db, start_process, ros_node) -> None:
+    run = read_run('room_run_kidnapped')
+    start_localizer(start_process, room_db, 'use_sim_time:=true')
+    listener = Listener(ros_node)
+    listen_to_bag_topics(ros_node)
+    play(start_process, ros_node, 'room_run_kidnapped', '--rate', '2', '--clock')
+    spin_for(ros_node, 1.5)
+    stamps, errors = pose_errors(listener, run['truth'])
+    start = min(run['truth'])
+    kidnap = start + 21_900_000_000  # where the ground truth jumps by 2.7 m
+    before, after = errors[stamps < kidnap], errors[stamps > kidnap + 3_000_000_000]
+    assert len(before) > 50 and len(after) > 50
+    assert np.median(before) < 0.1 and np.median(after) < 0.1, (np.median(before),
+                                                                np.median(after))
+    # The map -> odom correction moved by the kidnapping (odometry did not notice).
+    tf_stamps = np.array([stamp_ns(t.header.stamp) for t in listener.tf])
+    early = planar(listener.tf[int(np.flatnonzero(tf_stamps < kidnap)[-1])])
+    late = planar(listener.tf[-1])
+    assert math.hypot(*(late[:2] - early[:2])) > 2.0
+    # Diagnostics are stamped with the bag's clock (use_sim_time).
+    assert ros_node.spin_until(lambda: listener.diagnostics, timeout=10)
+    assert abs(stamp_ns(listener.diagnostics[0].header.stamp) - start) < 100e9
+
+
+class Publisher:
+    """Bad and good input for the localizer, from the test node."""
+
+    def __init__(self, ros_node, run: dict) -> None:
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+        self.ros, self.run = ros_node, run
+        node = ros_node.node
+        self.image = node.create_publisher(Image, '/camera/image_raw', 10)
+        self.compressed = node.create_publisher(CompressedImage, IMAGE_TOPIC, 10)
+        self.info = node.create_publisher(CameraInfo, '/camera/camera_info', 10)
+        self.odom = node.create_publisher(Odometry, '/odom', 50)
+        self.initial = node.create_publisher(PoseWithCovarianceStamped, '/initialpose', 10)
+        self.types = {'Image': Image, 'CompressedImage': CompressedImage,
+                      'CameraInfo': CameraInfo, 'Odometry': Odometry}
+        publishers = (self.image, self.compressed, self.info, self.odom, self.initial)
+        assert ros_node.spin_until(
+            lambda: all(p.get_subscription_count() > 0 for p in publishers), timeout=WAIT)
+
+    def frame(self, index: int, stamp: int):
+        """Bag image ``index`` as a CompressedImage with another stamp."""
+        source = self.run['images'][index % len(self.run['images'])][1]
+        msg = self.types['CompressedImage'](format=source.format, data=bytes(source.data))
+        msg.header.frame_id = 'camera'
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        return msg
+
+    def raw(self, stamp: int, encoding: str = 'mono8', width: int = 1024, height: int = 256,
+            step: int | None = None, data: bytes | None = None, index: int = 0):
+        msg = self.types['Image'](encoding=encoding, width=width, height=height,
+                                  step=width if step is None else step)
+        if data is None:
+            gray = decode_image(self.run['images'][index][1])
+            data = gray.tobytes() if gray.shape == (height, width) else bytes(width * height)
+        msg.data = data
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        return msg
+
+    def camera_info(self, width: int = 1024, height: int = 256):
+        info = self.run['info']
+        msg = self.types['CameraInfo'](width=width, height=height,
+                                       distortion_model=info.distortion_model,
+                                       d=[float(v) for v in info.d])
+        k = np.array(info.k, float)
+        if width != info.width:
+            k[[0, 2]] = width / (2 * math.pi), width / 2
+        msg.k = [float(v) for v in k]
+        return msg
+
+    def odometry(self, stamp: int, x: float, y: float = 0.0):
+        msg = self.types['Odometry']()
+        msg.header.frame_id, msg.child_frame_id = 'odom', 'base_link'
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+        msg.pose.pose.position.x, msg.pose.pose.position.y = x, y
+        msg.pose.pose.orientation.w = 1.0
+        return msg
+
+
+def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) -> None:
+    run = read_run('room_run')
+    node = start_localizer(start_process, room_db)
+    listener = Listener(ros_node)
+    pub = Publisher(ros_node, run)
+    t0 = run['images'][0][0]
+    tick = [t0]
+
+    def stamp(step_ns: int = 100_000_000) -> int:
+        tick[0] += step_ns
+        return tick[0]
+
+    def send(publisher, msg, pause: float = 0.15) -> None:
+        publisher.publish(msg)
+        spin_for(ros_node, pause)
+
+    def good_frames(n: int, start: int = 0) -> None:
+        for i in range(n):
+            send(pub.compressed, pub.frame(start + i, stamp()), 0.1)
+
+    # No CameraInfo at all: the database's camera is assumed, said once.
+    good_frames(8)
+    node.wait_for_output('no CameraInfo on /camera/camera_info', timeout=30)
+    assert ros_node.spin_until(lambda: len(listener.poses) > 0, timeout=30), node.output
+
+    bad_images = [
+        (pub.raw(stamp(), step=1000), 'needs step >= 1024, got 1000'),
+        (pub.raw(stamp(), encoding='yuv422', width=64, height=64, step=128,
+                 data=bytes(128 * 64)),
+         "unsupported image encoding 'yuv422'"),
+        (pub.raw(stamp(), data=b''), 'needs 262144 bytes of data, got 0'),
+        (pub.raw(stamp(), width=64, height=64), 'image is 64x64, the database camera '
+                                                '1024x256'),
+    ]
+    for msg, text in bad_images:
+        for _ in range(3):  # the same problem three times: one warning
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp(), 1_000_000_000)
+            send(pub.image, msg)
+        node.wait_for_output(text.replace('(', r'\(').replace(')', r'\)'), timeout=20)
+        assert node.output.count(text) == 1, (text, node.output)
+    good_frames(3, 8)
+    # Raw images work too.
+    count = len(listener.regions)
+    gray = decode_image(run['images'][11][1])
+    send(pub.image, pub.raw(stamp(), data=gray.tobytes()), 0.5)
+    assert ros_node.spin_until(lambda: len(listener.regions) == count + 1, timeout=10)
+
+    # A CameraInfo that does not match (then changes back): frames dropped meanwhile.
+    send(pub.info, pub.camera_info(512, 128))
+    node.wait_for_output('CameraInfo 512x128 panoramic .* does not match the database '
+                         'camera 1024x256', timeout=20)
+    count = len(listener.regions)
+    good_frames(3, 11)
+    assert len(listener.regions) == count
+    send(pub.info, pub.camera_info())
+    node.wait_for_output('CameraInfo matches the database camera again', timeout=20)
+    good_frames(3, 14)
+    assert len(listener.regions) > count
+
+    # NaN and jumping odometry: one warning each, no NaN anywhere.
+    for i in range(5):
+        send(pub.odom, pub.odometry(tick[0] + i * 20_000_000, float('nan')), 0.02)
+    node.wait_for_output('/odom: pose is not finite', timeout=20)
+    for i in range(5):
+        send(pub.odom, pub.odometry(tick[0] + (5 + i) * 20_000_000, 5.0 * (i % 2)), 0.02)
+    node.wait_for_output('/odom jumped by more than 1 m', timeout=20)
+    assert node.output.count('/odom jumped') == 1
+
+    # Stamps that go back: a little is dropped, a lot (a looping bag) resets the state.
+    send(pub.compressed, pub.frame(17, tick[0] - 500_000_000))
+    node.wait_for_output('older than the last frame', timeout=20)
+    send(pub.compressed, pub.frame(0, t0 - 100_000_000_000))
+    node.wait_for_output('time went back by 1\\d\\d.\\d s', timeout=20)
+    tick[0] = t0 - 100_000_000_000
+    good_frames(5, 1)
+    status = listener.wait_status(lambda s: int(s['resets']) >= 1)
+    assert int(status['dropped_stamp_went_back']) == 1 and int(status['dropped_decode']) >= 9
+
+    # A burst of 1,000 frames at 200 Hz: the node keeps up by dropping, stays alive and
+    # keeps publishing afterwards.
+    before = len(listener.regions)
+    period = 1 / 200
+    next_time = time.perf_counter()
+    frames = [pub.frame(20 + (i % 40), 0) for i in range(40)]
+    for i in range(1000):
+        msg = frames[i % 40]
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp(5_000_000),
+                                                                 1_000_000_000)
+        pub.compressed.publish(msg)
+        next_time += period
+        while time.perf_counter() < next_time:
+            ros_node.executor.spin_once(timeout_sec=max(0.0, next_time - time.perf_counter()))
+    spin_for(ros_node, 1.0)
+    assert node.popen.poll() is None, node.output
+    burst = len(listener.regions) - before
+    assert 10 < burst < 1000  # processed some, dropped the rest
+    after = len(listener.regions)
+    good_frames(5, 60)
+    assert len(listener.regions) > after
+    assert all(np.all(np.isfinite([p.pose.position.x, p.pose.position.y]))
+               for p in listener.poses)
+    assert 'Traceback' not in node.output
+    print(f'burst of 1000 frames at 200 Hz: {burst} processed')
+
+
+def test_image_reliable_receives_large_raw_images(room_db, start_process, ros_node) -> None:
+    # 786 kB bgr8 frames: Fast DDS drops best-effort samples over its 0.5 MB shared-memory
+    # segment between processes, so these need image_reliable (and a reliable publisher).
+    run = read_run('room_run')
+    start_localizer(start_process, room_db, 'image_reliable:=true')
+    listener = Listener(ros_node)
+    pub = Publisher(ros_node, run)
+    for i in range(3):
+        gray = decode_image(run['images'][i][1])
+        bgr = np.repeat(gray[:, :, None], 3, axis=2)
+        pub.image.publish(pub.raw(run['images'][i][0], encoding='bgr8', step=3 * 1024,
+                                  data=bgr.tobytes()))
+        spin_for(ros_node, 0.3)
+    assert ros_node.spin_until(lambda: len(listener.regions) == 3, timeout=20)
+    assert ros_node.spin_until(lambda: listener.poses, timeout=5)
+
+
+def rss_kib(pid: int) -> int:
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1])
+    raise AssertionError('no VmRSS')
+
+
+def memory_over(frames: int, room_db, start_process, ros_node, rate_hz: float = 100) -> None:
+    """Send ``frames`` images at ``rate_hz``, stamps 10 ms apart: the run at real speed.
+
+    Each bag image is sent ten times with advancing stamps (the images change at the
+    bag's 10 Hz), with the bag's odometry at 50 Hz; past the end the run starts again
+    (a kidnapping, as far as the localizer can tell). The node processes what it can.
+    """
+    run = read_run('room_run')
+    node = start_localizer(start_process, room_db)
+    listener = Listener(ros_node)
+    pub = Publisher(ros_node, run)
+    info = pub.camera_info()
+    t0 = run['images'][0][0]
+    odom_stamps = sorted(run['odom'])
+    cycle = len(run['images']) * 10
+    period = 1 / rate_hz
+    warm = max(500, frames // 5)
+    samples = []
+    next_time = time.perf_counter()
+    for i in range(frames):
+        stamp = t0 + i * 10_000_000
+        pub.compressed.publish(pub.frame((i % cycle) // 10, stamp))
+        if i % 2 == 0:
+            x, y, yaw = run['odom'][odom_stamps[(i % cycle) // 2]]
+            odom = pub.odometry(stamp, x, y)
+            odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = \
+                math.sin(yaw / 2), math.cos(yaw / 2)
+            pub.odom.publish(odom)
+        if i % 10 == 0:
+            pub.info.publish(info)
+        if i >= warm and i % 100 == 0:
+            samples.append(rss_kib(node.popen.pid))
+        next_time += period
+        while time.perf_counter() < next_time:
+            ros_node.executor.spin_once(timeout_sec=max(0.0, next_time - time.perf_counter()))
+    spin_for(ros_node, 1.0)
+    samples.append(rss_kib(node.popen.pid))
+    status = listener.wait_status(lambda s: True)
+    assert node.popen.poll() is None and 'Traceback' not in node.output
+    assert int(status['frames_processed']) > frames / 10 and len(listener.poses) > frames / 20
+    growth = samples[-1] / samples[0]
+    print(f'{frames} frames at {rate_hz:g} Hz: {status["frames_processed"]} processed, '
+          f'{len(listener.poses)} poses, p50 {status["latency_p50_ms"]} ms, RSS '
+          f'{samples[0] / 1024:.0f} -> {samples[-1] / 1024:.0f} MiB ({growth:.3f}x)')
+    assert growth < 1.10, samples
+
+
+def test_memory_flat_over_2000_frames(room_db, start_process, ros_node) -> None:
+    memory_over(2000, room_db, start_process, ros_node)
+
+
+@pytest.mark.bench
+def test_memory_flat_over_10000_frames(room_db, start_process, ros_node) -> None:
+    memory_over(10_000, room_db, start_process, ros_node)
+
+
+def edited_copy(source: Path, target: Path, *statements: str) -> Path:
+    target.write_bytes(source.read_bytes())
+    connection = sqlite3.connect(target)
+    for statement in statements:
+        connection.execute(statement)
+    connection.commit()
+    connection.close()
+    return target
+
+
+@pytest.mark.parametrize('case', ['missing', 'random_bytes', 'newer_schema'])
+def test_bad_database_exits_2_with_one_line(case, room_db, ros_env, tmp_path) -> None:
+    path = tmp_path / f'{case}.db'
+    expected = {'missing': 'no such file', 'random_bytes': 'not a SQLite database',
+                'newer_schema': f'has schema version {SCHEMA_VERSION + 1}'}[case]
+    if case == 'random_bytes':
+        path.write_bytes(np.random.default_rng(0).bytes(50_000))
+    elif case == 'newer_schema':
+        newer = SCHEMA_VERSION + 1
+        edited_copy(room_db, path, f'PRAGMA user_version = {newer}',
+                    f"UPDATE meta SET value = '{newer}' WHERE key = 'schema_version'")
+    proc = subprocess.run(['localizer', '--ros-args', '-p', f'db:={path}'], env=ros_env,
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('localizer: error: '), proc.stderr
+    assert expected in lines[0] and str(path) in lines[0]
+
+
+if __name__ == '__main__':
+    sys.exit(pytest.main([__file__, '-q']))
