@@ -153,6 +153,36 @@ def table(rows: list[dict]) -> str:
     return '\n'.join(lines)
 
 
+def full_pose_times(trials: int = 100, seed: int = 1) -> str:
+    """Return a Markdown table of the CPU time of a full pose (two solves, intersection).
+
+    50 points, 20 % outliers, 0.5 px noise: the localizer's tracking case.
+    """
+    lines = ['| camera | method | median ms | p95 ms |', '|---|---|---|---|']
+    config = TwoViewConfig()
+    for kind, methods, make_poses in (('panoramic', PANORAMIC_METHODS, _panoramic_trial),
+                                      ('pinhole', PINHOLE_METHODS, _pinhole_trial)):
+        camera = make_camera(kind)
+        rng = np.random.default_rng(seed)
+        scenes = [render_views(camera, make_poses(rng), rng, n=50, noise_px=0.5, outliers=0.2)
+                  for _ in range(trials)]
+        for method in (m for m in methods if not m.endswith(':raw')):
+            times = []
+            for views in scenes:
+                start = time.process_time()
+                try:
+                    motion_a, motion_b, _ = _solve(method, camera, views, config)
+                    position_from_two_views(views.poses[0], motion_a, views.poses[1], motion_b)
+                except VisibilityBuilderError:
+                    pass
+                times.append(time.process_time() - start)
+            lines.append(f'| {kind} | {method} | {1e3 * np.median(times):.1f} | '
+                         f'{1e3 * np.percentile(times, 95):.1f} |')
+    return '\n'.join(lines)
+
+
 if __name__ == '__main__':
     count = int(sys.argv[1]) if len(sys.argv) > 1 else 200
     print(table(run(trials=count)))
+    print()
+    print(full_pose_times(trials=max(count // 2, 1)))

@@ -21,7 +21,8 @@ def test_two_view_error_against_pixel_noise():
     out = subprocess.run([sys.executable, str(SCRIPT), trials], capture_output=True,
                          text=True, check=True, timeout=3000, cwd=SCRIPT.parent)
     print(out.stdout)
-    rows = [line for line in out.stdout.splitlines() if line.startswith('| pan')
+    noise_table = out.stdout.split('\n\n')[0]
+    rows = [line for line in noise_table.splitlines() if line.startswith('| pan')
             or line.startswith('| pin')]
     assert len(rows) == 9
     for row in rows:
