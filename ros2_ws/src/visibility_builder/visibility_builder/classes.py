@@ -42,19 +42,19 @@ Departures from the text, with reasons:
   in a non-symmetric relation. The widely visible classes that the decomposition
   needs have the most links, so one ambiguous view anywhere (the feature missed at
   one pose and its nearest neighbour there some other feature) removes exactly the
-  classes worth keeping: on the room bag 501 classes reach 16 poses with class
-  exclusion (tau 120), 704 with feature exclusion (tau 150). Here the features of a
-  broken relation are excluded before the closure (they merge with nothing, so no
-  chain runs through them) and the rest of their classes stays, which is the
-  thesis's own aim ("discard all the features that are not distinctive enough").
+  classes worth keeping: on the room bag (3 SIFT octave layers) 501 classes reach 16
+  poses with class exclusion (tau 120), 704 with feature exclusion (tau 150). Here the
+  features of a broken relation are excluded before the closure (they merge with
+  nothing, so no chain runs through them) and the rest of their classes stays, which
+  is the thesis's own aim ("discard all the features that are not distinctive
+  enough").
   Local uniqueness still excludes whole classes. Descriptors alone then leave more
   mixed classes (2.5 % instead of 0.5-0.9 % on the room bag); the builder's
   geometric verification (:mod:`visibility_builder.verification`) removes them
-  (0.24 %, ``docs/classes.md``). Splitting a class at its broken relations
-  (excluding the class only when a broken relation joins two of its own members)
-  and excluding a class only when two or more of its members are broken were
-  measured too and kept fewer classes.
-
+  (0.24 %; 0.20 % with the default 5 octave layers, ``docs/classes.md``). Splitting a
+  class at its broken relations (excluding the class only when a broken relation
+  joins two of its own members) and excluding a class only when two or more of its
+  members are broken were measured too and kept fewer classes.
 * **Pose pairs** v != w are unordered and each is compared once; the nearest
   neighbours of both directions (v -> w and w -> v) come from the same distance
   matrix, which is what the algorithm's loop over ordered pairs computes.
