@@ -43,9 +43,9 @@ from typing import Any
 
 __all__ = ['register', 'run']
 
-#: Correspondence settings the demo builds with (the builder's defaults cover less of
-#: the room's poses; see docs/localization.md).
-DEMO_BUILD_SETTINGS = ('classes.tau=120', 'classes.symmetry_factor=1')
+#: Builder settings of the demo's database beyond the builder's defaults (none: the
+#: defaults cover the room; ``--build-set`` adds some).
+DEMO_BUILD_SETTINGS: tuple[str, ...] = ()
 RECORDED_TOPICS = ('/localizer/pose', '/localizer/pose_with_covariance', '/localizer/region',
                    '/ground_truth/pose', '/diagnostics')
 PLAYED_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed', '/camera/camera_info',
@@ -67,8 +67,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--db', default=None,
                         help='use this database instead of building OUT/room.db')
     parser.add_argument('--build-set', action='append', default=None, metavar='NAME=VALUE',
-                        help='vbn build --set (repeatable; default '
-                             + ' '.join(DEMO_BUILD_SETTINGS) + ')')
+                        help="vbn build --set (repeatable; default: the builder's defaults)")
     parser.add_argument('--scene', default='room', help='scene drawn under the trajectories')
     parser.add_argument('--rate', type=float, default=1.0, help='playback rate (1.0)')
     parser.add_argument('--timeout', type=float, default=180.0,
