@@ -69,8 +69,9 @@ ODOM_MAX_EXTRAPOLATION_S = 0.1
 ODOM_WAIT_S = 0.05
 #: Frames in the latency window of /diagnostics.
 LATENCY_WINDOW = 200
-#: Images without any CameraInfo before the node says it uses the database's camera.
-CAMERA_INFO_GRACE = 5
+#: Seconds of images without any CameraInfo before the node says it uses the database's
+#: camera (CameraInfo and the first image arrive in either order).
+CAMERA_INFO_GRACE_S = 2.0
 #: A repeated warning is logged again at most this often, with a count.
 WARN_REPEAT_S = 10.0
 
@@ -269,6 +270,7 @@ def _make_node() -> Any:
             self.camera_info_seen = False
             self.camera_problem = ''
             self.camera_key: tuple | None = None
+            self.first_image: float | None = None
             self.last_stamp: int | None = None
             self.transform: StampedTransform | None = None
             self.estimate = None
@@ -436,7 +438,9 @@ def _make_node() -> Any:
             if problem:
                 self.stats.drop('camera_info')  # said once when the CameraInfo came
                 return
-            if not seen and self.stats.received == CAMERA_INFO_GRACE:
+            if self.first_image is None:
+                self.first_image = start
+            if not seen and start - self.first_image >= CAMERA_INFO_GRACE_S:
                 self.warnings.warn('no_camera_info', 'no CameraInfo on /camera/camera_info: '
                                    f'assuming the database camera {self.camera.width}x'
                                    f'{self.camera.height} {self.camera.kind}')
