@@ -129,7 +129,8 @@ def build_full_database(bag: str | os.PathLike[str], sift: SiftConfig | None = N
         sift: SIFT settings (use the landmark database's, for a fair comparison;
             default :class:`SiftConfig`).
         workers: Processes for SIFT (default every core).
-        cache: An ``.npz`` file: read when it exists, else written after building.
+        cache: An ``.npz`` file: read when it exists with the same SIFT settings, else
+            written after building.
 
     Returns:
         The full feature database.
@@ -137,12 +138,15 @@ def build_full_database(bag: str | os.PathLike[str], sift: SiftConfig | None = N
     Raises:
         LocalizerError: The bag cannot be read.
     """
+    sift = sift or SiftConfig()
     if cache is not None and Path(cache).is_file():
-        _LOG.info('full feature database from %s', cache)
-        return load_full_database(cache)
+        cached = load_full_database(cache)
+        if cached.sift == sift:
+            _LOG.info('full feature database from %s', cache)
+            return cached
+        _LOG.info('%s holds other SIFT settings: extracting again', cache)
     from visibility_builder.exploration import read_exploration
 
-    sift = sift or SiftConfig()
     try:
         exploration = read_exploration(bag)
     except VisibilityBuilderError as error:
