@@ -64,7 +64,7 @@ class LocalizerConfig:
     vote_candidates: int = 4
     verify_ratio: float = 0.85
     min_inliers: int = 8
-    max_residual_px: float = 2.0
+    max_residual_px: float = 1.0
     min_tracked: int = 8
     lk_window: int = 21
     lk_levels: int = 3
@@ -73,7 +73,7 @@ class LocalizerConfig:
     redetect_per_frame: int = 3
     redetect_cooldown: int = 10
     switch_redetect: int = 12
-    refresh_per_frame: int = 2
+    refresh_per_frame: int = 4
     redetect_max_distance: float = 280.0
     predict_horizon_s: float = 0.6
     border_margin: float = 1.0

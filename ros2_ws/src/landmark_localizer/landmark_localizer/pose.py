@@ -233,7 +233,7 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     data = _correspondences(index, region, class_ids, uv, config.min_inliers)
     if data is None:
         return None
-    threshold = max(1.0, 0.75 * config.max_residual_px) / focal
+    threshold = 0.75 * config.max_residual_px / focal
     pose = np.asarray(initial, float).copy()
     step = np.array([1e-4, 1e-4, 1e-5])
     probes = pose + np.diag(step)
