@@ -271,7 +271,8 @@ def test_looping_bag_with_sim_time_resets_cleanly(room_db, start_process, ros_no
     start_process(['vbn', 'play', str(BAGS / 'room_run'), '--loop', '--clock', '--rate', '2',
                    '--start-offset', '36'], name='play')
     status = listener.wait_status(lambda s: int(s['resets']) >= 2, timeout=WAIT)
-    node.wait_for_output(r'time went back by 7\.\d s', timeout=10)
+    node.wait_for_output(r'time went back by \d\.\d s \(a bag that loops\?\): state reset',
+                         timeout=10)
     poses = len(listener.poses)
     status = listener.wait_status(lambda s: int(s['resets']) >= 3, timeout=WAIT)
     assert len(listener.poses) > poses + 10 and status['state'] == 'TRACKING'
@@ -468,14 +469,16 @@ def test_image_reliable_receives_large_raw_images(room_db, start_process, ros_no
     start_localizer(start_process, room_db, 'image_reliable:=true')
     listener = Listener(ros_node)
     pub = Publisher(ros_node, run)
-    for i in range(3):
+    # The first frame votes (up to a second); frames sent meanwhile replace each other.
+    for i in range(30):
         gray = decode_image(run['images'][i][1])
         bgr = np.repeat(gray[:, :, None], 3, axis=2)
         pub.image.publish(pub.raw(run['images'][i][0], encoding='bgr8', step=3 * 1024,
                                   data=bgr.tobytes()))
-        spin_for(ros_node, 0.3)
-    assert ros_node.spin_until(lambda: len(listener.regions) == 3, timeout=20)
-    assert ros_node.spin_until(lambda: listener.poses, timeout=5)
+        spin_for(ros_node, 0.2)
+        if len(listener.poses) >= 3:
+            break
+    assert len(listener.poses) >= 3 and len(listener.regions) >= 3
 
 
 def rss_kib(pid: int) -> int:
