@@ -37,7 +37,7 @@ class SiftConfig:
         n_features: Keep the best ``n_features`` keypoints by response (0: all).
         n_octave_layers: Layers per octave (Lowe's 3 finds fewer keypoints that stay
             stable across the 25 cm lattice: 5 gives 17 % more classes on the room bag,
-            docs/classes.md, at the same extraction time).
+            docs/classes.md, for 21 % more SIFT time).
         contrast_threshold: Rejects weak extrema (higher: fewer keypoints).
         edge_threshold: Rejects edge-like extrema (lower: fewer keypoints).
         sigma: Gaussian of the first octave.
