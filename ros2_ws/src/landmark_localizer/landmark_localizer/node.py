@@ -66,7 +66,7 @@ ODOM_MAX_EXTRAPOLATION_S = 0.1
 #: An image newer than the newest odometry waits at most this long for the odometry of
 #: its stamp (which arrives on another topic, often a moment later), as tf2's message
 #: filter waits for a transform.
-ODOM_WAIT_S = 0.05
+ODOM_WAIT_S = 0.1
 #: Frames in the latency window of /diagnostics.
 LATENCY_WINDOW = 200
 #: Seconds of images without any CameraInfo before the node says it uses the database's
