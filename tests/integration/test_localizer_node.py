@@ -401,6 +401,13 @@ def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) 
     count = len(listener.regions)
     good_frames(3, 11)
     assert len(listener.regions) == count
+    garbage = pub.camera_info()
+    garbage.k = [float('nan')] * 9
+    send(pub.info, garbage)
+    send(pub.info, garbage)
+    node.wait_for_output(r'CameraInfo changed: CameraInfo cannot be used \(camera info k '
+                         r'must hold 9 finite numbers', timeout=20)
+    assert node.output.count('CameraInfo cannot be used') == 1
     send(pub.info, pub.camera_info())
     node.wait_for_output('CameraInfo matches the database camera again', timeout=20)
     good_frames(3, 14)

@@ -248,7 +248,6 @@ def _make_node() -> Any:
     from visibility_builder.ros_tools.tf_broadcast import TransformBroadcaster
     from visibility_builder.transforms import StampedTransform, correction
 
-
     class LocalizerNode(Node):
         """Declares the parameters, opens the database, localizes each image."""
 
@@ -279,6 +278,10 @@ def _make_node() -> Any:
                 history=HistoryPolicy.KEEP_LAST, depth=1, durability=DurabilityPolicy.VOLATILE,
                 reliability=ReliabilityPolicy.RELIABLE if self.settings.image_reliable else
                 ReliabilityPolicy.BEST_EFFORT)
+            # Best effort matches reliable and best-effort publishers alike (drivers use
+            # both); a lost odometry or camera-info message only widens a gap.
+            sensor_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
+                                    reliability=ReliabilityPolicy.BEST_EFFORT)
             frames = MutuallyExclusiveCallbackGroup()
             inputs = MutuallyExclusiveCallbackGroup()
             self.pose_pub = self.create_publisher(PoseStamped, '/localizer/pose', 10)
@@ -289,16 +292,18 @@ def _make_node() -> Any:
             self.markers_pub = self.create_publisher(MarkerArray, '/localizer/regions',
                                                      LATCHED_QOS)
             self.tf = TransformBroadcaster(self) if self.settings.tf_broadcast else None
-            self.create_subscription(Odometry, '/odom', self._on_odom, 50,
-                                     callback_group=inputs)
-            self.create_subscription(CameraInfo, '/camera/camera_info', self._on_camera_info,
-                                     10, callback_group=inputs)
+            self.create_subscription(Odometry, '/odom', self._guarded('/odom', self._on_odom),
+                                     sensor_qos, callback_group=inputs)
+            self.create_subscription(CameraInfo, '/camera/camera_info',
+                                     self._guarded('/camera/camera_info', self._on_camera_info),
+                                     sensor_qos, callback_group=inputs)
             self.create_subscription(Image, IMAGE_TOPICS[0], self._on_image, frame_qos,
                                      callback_group=frames)
             self.create_subscription(CompressedImage, IMAGE_TOPICS[1], self._on_image,
                                      frame_qos, callback_group=frames)
             self.create_subscription(PoseWithCovarianceStamped, '/initialpose',
-                                     self._on_initial_pose, 10, callback_group=frames)
+                                     self._guarded('/initialpose', self._on_initial_pose), 10,
+                                     callback_group=frames)
             self.create_service(Empty, '~/reinitialize_global_localization',
                                 self._on_reinitialize, callback_group=frames)
             if self.tf is not None and self.settings.transform_publish_period > 0:
@@ -338,6 +343,19 @@ def _make_node() -> Any:
             return settings, config
 
         # -- inputs ----------------------------------------------------------------------
+        def _guarded(self, topic: str, callback: Callable[[Any], None]
+                     ) -> Callable[[Any], None]:
+            """Return ``callback`` that logs what it raises instead of ending the node."""
+            def guarded(msg: Any) -> None:
+                try:
+                    callback(msg)
+                except Exception as error:  # noqa: BLE001 - a node reports, it does not die
+                    if self.context.ok():
+                        text = f'{type(error).__name__}: {error}'.splitlines()[0]
+                        self.warnings.warn(f'{topic}:{reason_kind(text)}',
+                                           f'{topic}: message ignored: {text}')
+            return guarded
+
         def _on_odom(self, msg: Any) -> None:
             frames = (msg.header.frame_id, msg.child_frame_id)
             wanted = (self.settings.odom_frame_id, self.settings.base_frame_id)
@@ -365,8 +383,9 @@ def _make_node() -> Any:
                                    'restarted')
 
         def _on_camera_info(self, msg: Any) -> None:
+            # Bytes, so that a NaN equals itself and an unchanged CameraInfo is one check.
             key = (int(msg.width), int(msg.height), str(msg.distortion_model),
-                   tuple(float(v) for v in msg.k), tuple(float(v) for v in msg.d))
+                   np.asarray(msg.k, float).tobytes(), np.asarray(msg.d, float).tobytes())
             with self.lock:
                 self.camera_info_seen = True
                 if key == self.camera_key:
