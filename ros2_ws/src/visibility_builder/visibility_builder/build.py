@@ -9,6 +9,7 @@ read                 images, camera info, image poses             :mod:`.explora
 sample               sampled poses, pose graph G (6.2.1)          :mod:`.sampled_poses`
 features             SIFT per image, in parallel (8.3.2)          :mod:`.features`
 classes              correspondence classes, Algorithm 6.3        :mod:`.classes`
+verify               one scene point per class (rays meet)        :mod:`.verification`
 filter               retain good features (6.2.2, 8.3.2)          :mod:`.filters`
 decompose            rho-MORDP regions (Chapter 5)                :mod:`landmark_db.decomposition`
 model views          two or three views, extra features (7.2)     :mod:`.model_views`
@@ -52,6 +53,7 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.exploration import Exploration, ReadConfig, read_exploration
 from visibility_builder.features import ImageFeatures, SiftConfig, extract_many
 from visibility_builder.filters import FilterConfig, retain_good_features
+from visibility_builder.geometry.camera import camera_from_info
 from visibility_builder.geometry.frames import compose_poses, invert_pose
 from visibility_builder.model_views import (
     ImageTable,
@@ -61,6 +63,7 @@ from visibility_builder.model_views import (
     select_model_views,
 )
 from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
+from visibility_builder.verification import VerifyConfig, verify_classes
 
 __all__ = ['BuildConfig', 'BuildReport', 'BuildResult', 'DecompositionConfig', 'build',
            'build_from_exploration', 'config_from_flat', 'flat_config',
@@ -108,6 +111,7 @@ class BuildConfig:
         sampling: Grouping frames into poses, graph connectivity.
         sift: SIFT settings (stored in the database for the localizer).
         classes: Algorithm 6.3 (tau, gamma, ratio).
+        verify: Geometric verification of the classes.
         filters: Section 6.2.2 filters.
         decomposition: Algorithm, k, rho, sigma.
         model_views: Views and extra features per region.
@@ -119,6 +123,7 @@ class BuildConfig:
     sampling: SamplingConfig = field(default_factory=SamplingConfig)
     sift: SiftConfig = field(default_factory=SiftConfig)
     classes: ClassConfig = field(default_factory=ClassConfig)
+    verify: VerifyConfig = field(default_factory=VerifyConfig)
     filters: FilterConfig = field(default_factory=FilterConfig)
     decomposition: DecompositionConfig = field(default_factory=DecompositionConfig)
     model_views: ModelViewConfig = field(default_factory=ModelViewConfig)
@@ -138,7 +143,8 @@ class BuildConfig:
         return self.workers or os.cpu_count() or 1
 
 
-_SECTIONS = ('read', 'sampling', 'sift', 'classes', 'filters', 'decomposition', 'model_views')
+_SECTIONS = ('read', 'sampling', 'sift', 'classes', 'verify', 'filters', 'decomposition',
+             'model_views')
 
 
 def flat_config(config: BuildConfig) -> dict[str, Any]:
@@ -360,6 +366,17 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
     classes = correspondence_classes(
         pose_descriptors, sampling.edges,
         replace(config.classes, workers=max(config.classes.workers, 1)))
+    # One scene point per class: the rays of its members must meet (verification.py).
+    classes = verify_classes(
+        classes,
+        [np.concatenate([features[i].keypoints for i in members])
+         for members in sampling.frames_of_pose],
+        [np.concatenate([features[i].sizes for i in members])
+         for members in sampling.frames_of_pose],
+        [np.concatenate([np.repeat(np.asarray([frames[i].camera_pose], float), len(features[i]),
+                                   axis=0) for i in members])
+         for members in sampling.frames_of_pose],
+        camera_from_info(exploration.camera_info), config.verify)
     sizes_before = np.asarray(classes.visibility.sum(axis=0)).ravel().astype(int)
     report.visibility_sizes_before = sizes_before
     stages.end(**{k: (int(v) if float(v).is_integer() else float(v))
@@ -405,7 +422,9 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
     stages.begin('model_views')
     database = _assemble(exploration, sampling, features, classes.labels, kept, visibility,
                          decomposition, config)
-    stages.end(model_views=sum(len(r.model_views) for r in database.regions),
+    stages.end(regions=database.n_regions,
+               regions_without_view=len(decomposition.regions) - database.n_regions,
+               model_views=sum(len(r.model_views) for r in database.regions),
                extra_features=int(sum(r.extra.size for r in database.regions)),
                descriptors=int(database.classes.descriptors.shape[0]))
 
@@ -469,12 +488,34 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
         vis.shape[1], config.descriptors_per_class)
 
     regions = []
+    dropped = []
     for region in decomposition.regions:
         landmark = np.asarray(region.features, np.int64)
         extra = extra_features(vis, region.poses, landmark, config.model_views)
-        views = select_model_views(table, region.poses, landmark, extra, config.model_views)
+        try:
+            views = select_model_views(table, region.poses, landmark, extra,
+                                       config.model_views)
+        except VisibilityBuilderError as error:
+            # Several images per pose (pinhole headings): the pose sees the k landmark
+            # features, but no single image does, so the region has no model view.
+            dropped.append(region)
+            _LOG.warning('region dropped: %s', error)
+            continue
         regions.append(RegionRecord(poses=region.poses, landmark=landmark, extra=extra,
                                     model_views=views))
+    if not regions:
+        raise VisibilityBuilderError(
+            'no region has an image that shows its whole landmark (several images per '
+            'pose each see only part of it): try a smaller --k')
+    uncovered = decomposition.uncovered
+    if dropped:
+        kept_cover = np.zeros(len(sampling.positions), bool)
+        for region in regions:
+            kept_cover[region.poses] = True
+        lost = np.concatenate([r.poses for r in dropped])
+        uncovered = np.union1d(uncovered, lost[~kept_cover[lost]]).astype(np.int64)
+        _LOG.warning('%d of %d regions dropped: no image shows the whole landmark',
+                     len(dropped), len(decomposition.regions))
 
     dc = config.decomposition
     info = BuildInfo(
@@ -493,4 +534,4 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
                          edges=sampling.edges, spacing=sampling.spacing)
     return LandmarkDatabase(info=info, poses=poses,
                             classes=FeatureClasses(descriptors, offsets, vis),
-                            regions=tuple(regions), uncovered=decomposition.uncovered)
+                            regions=tuple(regions), uncovered=uncovered)
