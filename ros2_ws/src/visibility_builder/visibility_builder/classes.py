@@ -91,22 +91,18 @@ Reference: thesis Section 6.2.1, equations (6.3) and (6.4), Figure 6.3.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from contextlib import contextmanager
-import ctypes
 from dataclasses import dataclass, field
-import functools
 import logging
 import math
-from pathlib import Path
-import re
 import time
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from visibility_builder.blas import set_blas_threads, single_threaded_blas
 from visibility_builder.errors import VisibilityBuilderError
 
 __all__ = [
@@ -117,7 +113,6 @@ __all__ = [
     'correspondence_classes',
     'match_pose_pair',
     'pose_pairs_within',
-    'single_threaded_blas',
 ]
 
 logger = logging.getLogger(__name__)
@@ -625,64 +620,7 @@ _WORKER_DESCRIPTORS: list[np.ndarray] = []
 def _init_worker(descriptors: list[np.ndarray]) -> None:
     global _WORKER_DESCRIPTORS
     _WORKER_DESCRIPTORS = descriptors
-    for _, set_threads in _openblas_thread_controls():
-        set_threads(1)
-
-
-# -- BLAS threads ----------------------------------------------------------------------
-
-_OPENBLAS_SYMBOLS = [
-    ('scipy_openblas_get_num_threads64_', 'scipy_openblas_set_num_threads64_'),
-    ('scipy_openblas_get_num_threads', 'scipy_openblas_set_num_threads'),
-    ('openblas_get_num_threads64_', 'openblas_set_num_threads64_'),
-    ('openblas_get_num_threads', 'openblas_set_num_threads'),
-]
-
-
-@functools.lru_cache(maxsize=1)
-def _openblas_thread_controls() -> tuple[tuple[Callable[[], int], Callable[[int], None]], ...]:
-    """Get/set thread-count functions of the OpenBLAS libraries loaded in this process.
-
-    Found the way threadpoolctl finds them (the loaded shared objects, then the
-    known symbol names); empty where there is no ``/proc/self/maps`` or no OpenBLAS.
-    """
-    try:
-        maps = Path('/proc/self/maps').read_text()
-    except OSError:
-        return ()
-    controls = []
-    for path in sorted(set(re.findall(r'(/\S*openblas\S*\.so[\w.]*)', maps))):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for get_name, set_name in _OPENBLAS_SYMBOLS:
-            if hasattr(lib, get_name) and hasattr(lib, set_name):
-                getter, setter = getattr(lib, get_name), getattr(lib, set_name)
-                getter.restype = ctypes.c_int
-                setter.argtypes = [ctypes.c_int]
-                controls.append((getter, setter))
-                break
-    return tuple(controls)
-
-
-@contextmanager
-def single_threaded_blas() -> Iterator[None]:
-    """Run OpenBLAS on one thread inside the block, restoring the count after.
-
-    The products of Algorithm 6.3 are small (a few hundred rows a side): waking
-    OpenBLAS's threads for each costs more than it saves. On the room bag, on two
-    shared cores, matching took 9.9 s with the default threads and 2.7 s with one.
-    """
-    controls = _openblas_thread_controls()
-    previous = [get() for get, _ in controls]
-    for _, set_threads in controls:
-        set_threads(1)
-    try:
-        yield
-    finally:
-        for (_, set_threads), count in zip(controls, previous):
-            set_threads(count)
+    set_blas_threads(1)
 
 
 def _match_chunk_in_worker(
