@@ -521,7 +521,7 @@ def memory_over(frames: int, room_db, start_process, ros_node, rate_hz: float = 
         stamp = t0 + i * 10_000_000
         pub.compressed.publish(pub.frame((i % cycle) // 10, stamp))
         if i % 2 == 0:
-            x, y, yaw = run['odom'][odom_stamps[(i % cycle) // 2]]
+            x, y, yaw = run['odom'][odom_stamps[min((i % cycle) // 2, len(odom_stamps) - 1)]]
             odom = pub.odometry(stamp, x, y)
             odom.pose.pose.orientation.z, odom.pose.pose.orientation.w = \
                 math.sin(yaw / 2), math.cos(yaw / 2)
@@ -542,6 +542,7 @@ def memory_over(frames: int, room_db, start_process, ros_node, rate_hz: float = 
     print(f'{frames} frames at {rate_hz:g} Hz: {status["frames_processed"]} processed, '
           f'{len(listener.poses)} poses, p50 {status["latency_p50_ms"]} ms, RSS '
           f'{samples[0] / 1024:.0f} -> {samples[-1] / 1024:.0f} MiB ({growth:.3f}x)')
+    print('RSS MiB every 1000 frames:', [round(v / 1024) for v in samples[::10]])
     assert growth < 1.10, samples
 
 
