@@ -10,6 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from visibility_builder import classes as classes_module
 from visibility_builder.classes import (
     ClassConfig,
     correspondence_classes,
@@ -219,7 +220,8 @@ def test_pose_pairs_within_gamma_on_a_grid():
     assert len(pose_pairs_within(edges, 9, 4)) == 36
 
 
-def test_invariants_on_random_worlds_and_workers_agree():
+def test_invariants_on_random_worlds_and_workers_agree(monkeypatch):
+    monkeypatch.setattr(classes_module, '_MIN_POOL_ENTRIES', 0)   # use the pool here
     rng = np.random.default_rng(3)
     scene = rng.normal(0, 60, (80, 32)).astype(np.float32) + 200
     poses = []
@@ -233,6 +235,32 @@ def test_invariants_on_random_worlds_and_workers_agree():
         two = correspondence_classes(poses, edges, replace(config, workers=2))
         assert [a.tolist() for a in one.labels] == [b.tolist() for b in two.labels]
         check_invariants(one)
+
+
+def test_uint8_descriptors_give_the_float32_classes_in_one_or_two_processes(monkeypatch):
+    monkeypatch.setattr(classes_module, '_MIN_POOL_ENTRIES', 0)
+    rng = np.random.default_rng(5)
+    scene = rng.integers(0, 256, (120, 128))
+    poses = [np.clip(scene[rng.choice(120, 50, replace=False)]
+                     + rng.integers(-10, 11, (50, 128)), 0, 255).astype(np.uint8)
+             for _ in range(16)]
+    edges = np.array([(i, i + 1) for i in range(15)] + [(i, i + 4) for i in range(12)])
+    config = ClassConfig(tau=200, gamma=2)
+    reference = correspondence_classes([p.astype(np.float32) for p in poses], edges, config)
+    for workers in (1, 2):
+        result = correspondence_classes(poses, edges, replace(config, workers=workers))
+        assert [a.tolist() for a in result.labels] == [b.tolist() for b in reference.labels]
+        assert {k: v for k, v in result.stats.items() if k != 'seconds'} == \
+            {k: v for k, v in reference.stats.items() if k != 'seconds'}
+    assert reference.stats['multi_pose_classes'] > 10
+
+
+def test_column_argmin_takes_the_first_row_on_ties():
+    rng = np.random.default_rng(7)
+    d2 = rng.integers(0, 4, (40, 30)).astype(np.float32)   # many ties
+    assert classes_module._argmin_columns(d2).tolist() == d2.argmin(axis=0).tolist()
+    assert classes_module._argmin_columns(d2[:, 5:17]).tolist() == \
+        d2[:, 5:17].argmin(axis=0).tolist()
 
 
 def check_invariants(one) -> None:

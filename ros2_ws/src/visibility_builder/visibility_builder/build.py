@@ -361,11 +361,11 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
 
     stages.begin('classes')
     pose_descriptors = [
-        np.concatenate([features[i].descriptors for i in members]).astype(np.float32)
+        np.concatenate([features[i].descriptors for i in members])  # uint8
         for members in sampling.frames_of_pose]
     classes = correspondence_classes(
         pose_descriptors, sampling.edges,
-        replace(config.classes, workers=max(config.classes.workers, 1)))
+        replace(config.classes, workers=max(config.classes.workers, config.n_workers)))
     # One scene point per class: the rays of its members must meet (verification.py).
     classes = verify_classes(
         classes,

@@ -29,11 +29,19 @@ class seen from one pose (the filters of Section 6.2.2 drop such classes).
 Implementation. The outcome of Figure 6.3 does not depend on the order in which pose
 pairs and features are visited (merging only grows classes and exclusion is sticky),
 so the loops become array operations: for every unordered pair of poses within gamma
-the squared distances ``|a|^2 + |b|^2 - 2 a.b`` come from one float32 BLAS product
-(a pose's partners are stacked into products of at most 1e6 entries), nearest neighbours in both
-directions are two ``argmin`` calls, and the transitive closure is the connected
-components of the graph of mutual matches (:func:`scipy.sparse.csgraph.connected_components`).
-Complexity: O(sum over pairs of n_v n_w d) for the distances, O(N) for the rest.
+the squared distances ``|a|^2 + |b|^2 - 2 a.b`` come from one float32 BLAS product of
+the augmented rows ``[a, |a|^2, 1]`` and ``[-2 b, 1, |b|^2]`` (a pose's partners are
+stacked into products of at most 1e6 entries), nearest neighbours in both directions
+are an ``argmin`` along the rows and a column minimum, and the transitive closure is
+the connected components of the graph of mutual matches
+(:func:`scipy.sparse.csgraph.connected_components`). SIFT descriptors are integers in
+0..255 (``uint8``, kept so in memory and converted one pose at a time), so every
+product, norm and sum stays an integer below 2**24 and the float32 distances are exact:
+the result does not depend on the order of the arithmetic. With ``workers > 1`` the
+pose pairs are matched in a 'spawn' process pool (never forked: the builder node calls
+this from a thread while rclpy runs), each task receiving only the descriptors of the
+poses it compares. Complexity: O(sum over pairs of n_v n_w d) for the distances, O(N)
+for the rest.
 
 Departures from the text, with reasons:
 
@@ -91,17 +99,19 @@ Reference: thesis Section 6.2.1, equations (6.3) and (6.4), Figure 6.3.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 import logging
 import math
+import multiprocessing
 import time
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from visibility_builder.allocator import reuse_freed_memory
 from visibility_builder.blas import set_blas_threads, single_threaded_blas
 from visibility_builder.errors import VisibilityBuilderError
 
@@ -122,6 +132,11 @@ EXCLUSIONS = ('feature', 'class')
 
 # Most distance-matrix entries per BLAS product (4 MB: small products stay in cache).
 _BLOCK_ENTRIES = 1_000_000
+# Work chunks per worker process (balances the end of the pool's queue).
+_CHUNKS_PER_WORKER = 8
+# Less matching work than this many distance entries (about 10 s of one core) runs in
+# the calling process: starting a spawn pool costs 1-4 s (the room bag has 0.6e9).
+_MIN_POOL_ENTRIES = 2_000_000_000
 
 
 @dataclass(frozen=True)
@@ -135,7 +150,9 @@ class ClassConfig:
         ratio: Lowe's ratio; a nearest neighbour within ``tau`` that is not closer
             than ``ratio`` times the second nearest counts as a non-symmetric match.
             ``None`` disables the test.
-        workers: processes that compute the pose-pair matches (1: in this process).
+        workers: processes that compute the pose-pair matches (1: in this process;
+            a 'spawn' pool otherwise, used when the pose pairs hold at least 2e9
+            distance entries, about 10 s of one core).
         symmetry_factor: a nearest neighbour that is not mutual breaks symmetry when
             it lies within ``symmetry_factor * tau`` (1: Figure 6.3 as printed, where
             the same ``tau`` decides both merging and exclusion).
@@ -267,8 +284,8 @@ def match_pose_pair(a: np.ndarray, b: np.ndarray, tau: float, ratio: float | Non
     """Evaluate relation (6.4) in both directions between two poses' features.
 
     Args:
-        a: ``(n_a, d)`` float32 descriptors of pose a.
-        b: ``(n_b, d)`` float32 descriptors of pose b.
+        a: ``(n_a, d)`` descriptors of pose a (float32 or uint8).
+        b: ``(n_b, d)`` descriptors of pose b.
         tau: largest matching distance.
         ratio: optional Lowe ratio (see :class:`ClassConfig`).
         symmetry_factor: non-mutual nearest neighbours within this times ``tau``
@@ -277,11 +294,7 @@ def match_pose_pair(a: np.ndarray, b: np.ndarray, tau: float, ratio: float | Non
     Returns:
         The :class:`PairMatches` of the pair.
     """
-    a = np.ascontiguousarray(a, dtype=np.float32)
-    b = np.ascontiguousarray(b, dtype=np.float32)
-    a_sq = np.einsum('ij,ij->i', a, a)
-    b_sq = np.einsum('ij,ij->i', b, b)
-    d2 = _squared_distances(a, a_sq, b, b_sq)
+    d2 = _augmented(a)[0] @ _augmented(b)[1].T
     return _relations(d2, float(tau) ** 2, ratio, (float(symmetry_factor) * tau) ** 2)
 
 
@@ -290,8 +303,9 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
     """Compute feature classes and per-pose visibility with Algorithm 6.3.
 
     Args:
-        pose_descriptors: per sampled pose, ``(n_i, d)`` float32 descriptors of all
-            features of that pose (all its images concatenated); ``n_i`` may be 0.
+        pose_descriptors: per sampled pose, ``(n_i, d)`` descriptors of all features
+            of that pose (all its images concatenated); ``n_i`` may be 0. ``uint8``
+            arrays (SIFT) stay ``uint8`` in memory; other dtypes are converted to float32.
         edges: ``(m, 2)`` int pose graph G (undirected).
         config: tau, gamma, ratio and workers; defaults of :class:`ClassConfig`.
 
@@ -325,25 +339,30 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
     pairs = pose_pairs_within(edges, n_poses, config.gamma)
     pairs = pairs[(counts[pairs[:, 0]] > 0) & (counts[pairs[:, 1]] > 0)]
 
-    chunks = _chunk_by_first_pose(pairs, config.workers)
+    self_poses = np.flatnonzero(counts > 1) if config.same_pose else np.zeros(0, np.int64)
+    entries = int(np.sum(counts[pairs[:, 0]] * counts[pairs[:, 1]]))
+    use_pool = config.workers > 1 and entries >= _MIN_POOL_ENTRIES
+    chunks = _chunk_by_first_pose(pairs, self_poses, config.workers if use_pool else 1)
     tau2 = float(config.tau) ** 2
     check2 = (float(config.symmetry_factor) * float(config.tau)) ** 2
     with single_threaded_blas():
-        if config.workers > 1 and len(chunks) > 1:
-            with ProcessPoolExecutor(max_workers=config.workers, initializer=_init_worker,
-                                     initargs=(descriptors,)) as pool:
-                results = list(pool.map(_match_chunk_in_worker,
-                                        [(chunk, tau2, config.ratio, check2)
-                                         for chunk in chunks]))
+        if use_pool and len(chunks) > 1:
+            # spawn, not fork: the builder node runs this with rclpy's threads alive.
+            context = multiprocessing.get_context('spawn')
+            with ProcessPoolExecutor(max_workers=config.workers, mp_context=context,
+                                     initializer=_init_worker) as pool:
+                results = list(pool.map(
+                    _match_chunk_in_worker,
+                    [(_chunk_descriptors(descriptors, chunk_pairs, chunk_self), offsets,
+                      chunk_pairs, chunk_self, tau2, config.ratio, check2)
+                     for chunk_pairs, chunk_self in chunks]))
         else:
-            results = [_match_chunk(descriptors, chunk, tau2, config.ratio, check2)
-                       for chunk in chunks]
+            results = [_match_chunk(descriptors, offsets, chunk_pairs, chunk_self, tau2,
+                                    config.ratio, check2)
+                       for chunk_pairs, chunk_self in chunks]
 
     mutual = [r[0] for r in results]
     broken = [r[1] for r in results]
-    if config.same_pose:
-        broken.extend(_repeated_in_pose(d, tau2) + offsets[v]
-                      for v, d in enumerate(descriptors) if len(d) > 1)
     merged = np.concatenate(mutual) if mutual else np.zeros((0, 2), dtype=np.int64)
     broken_ids = np.unique(np.concatenate(broken)) if broken else np.zeros(0, dtype=np.int64)
     if config.exclusion == 'feature':
@@ -465,16 +484,6 @@ def _gather(descriptors: list[np.ndarray], offsets: np.ndarray, ids: np.ndarray)
 
 # -- matching kernels ------------------------------------------------------------------
 
-def _squared_distances(a: np.ndarray, a_sq: np.ndarray, b: np.ndarray,
-                       b_sq: np.ndarray) -> np.ndarray:
-    """``(n_a, n_b)`` float32 squared distances by one BLAS product."""
-    d2 = a @ b.T
-    d2 *= -2.0
-    d2 += a_sq[:, None]
-    d2 += b_sq[None, :]
-    return d2
-
-
 def _relations(d2: np.ndarray, tau2: float, ratio: float | None,
                check2: float | None = None) -> PairMatches:
     """Relation (6.4) both ways from the squared distances of one pose pair.
@@ -487,7 +496,7 @@ def _relations(d2: np.ndarray, tau2: float, ratio: float | None,
     rows = np.arange(n_a)
     cols = np.arange(n_b)
     fwd = d2.argmin(axis=1)   # nearest neighbour in b of each feature of a
-    bwd = d2.argmin(axis=0)   # nearest neighbour in a of each feature of b
+    bwd = _argmin_columns(d2)  # nearest neighbour in a of each feature of b
     fwd_d2 = d2[rows, fwd]
     bwd_d2 = d2[bwd, cols]
     near_a = fwd_d2 <= tau2
@@ -515,6 +524,18 @@ def _relations(d2: np.ndarray, tau2: float, ratio: float | None,
                        int(near_a.sum() + near_b.sum()))
 
 
+def _argmin_columns(d2: np.ndarray) -> np.ndarray:
+    """``d2.argmin(axis=0)`` (first row on ties), by a column minimum and one scan.
+
+    numpy's ``argmin`` along the rows of a C-ordered matrix is several times slower
+    than ``min`` along them.
+    """
+    hits = np.flatnonzero(d2 == d2.min(axis=0))
+    rows, cols = np.divmod(hits, d2.shape[1])
+    _, first = np.unique(cols, return_index=True)   # first hit of each column: lowest row
+    return rows[first]
+
+
 def _passes_ratio(d2: np.ndarray, best_d2: np.ndarray, near: np.ndarray, ratio: float,
                   axis: int) -> np.ndarray:
     """Lowe's test ``d1 < ratio * d2`` for the queries that are ``near``."""
@@ -535,50 +556,112 @@ def _repeated_in_pose(a: np.ndarray, tau2: float) -> np.ndarray:
     feature never its own neighbour: the related pair either merges (breaking local
     uniqueness) or is not mutual (breaking symmetry), so both features are excluded.
     """
-    a_sq = np.einsum('ij,ij->i', a, a)
-    d2 = _squared_distances(a, a_sq, a, a_sq)
+    left, right = _augmented(a)
+    return _repeated_from_augmented(left, right, tau2)
+
+
+def _repeated_from_augmented(left: np.ndarray, right: np.ndarray, tau2: float) -> np.ndarray:
+    """:func:`_repeated_in_pose` from the pose's two augmented forms."""
+    d2 = left @ right.T
     np.fill_diagonal(d2, np.inf)
     nearest = d2.argmin(axis=1)
-    close = np.flatnonzero(d2[np.arange(len(a)), nearest] <= tau2)
+    close = np.flatnonzero(d2[np.arange(len(left)), nearest] <= tau2)
     return np.unique(np.concatenate([close, nearest[close]])).astype(np.int64)
 
 
-def _chunk_by_first_pose(pairs: np.ndarray, workers: int) -> list[np.ndarray]:
-    """Split the pairs into runs sharing the first pose, grouped into work chunks."""
+def _augmented(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rows ``[a, |a|^2, 1]`` and ``[-2 a, 1, |a|^2]`` (float32) of one pose's features.
+
+    The product of the first form of pose v with the second of pose w is the matrix of
+    squared distances ``|a|^2 + |b|^2 - 2 a.b`` in one BLAS call (exact for integer
+    descriptors: every term and partial sum is an integer below 2**24).
+    """
+    a = np.asarray(a, dtype=np.float32)
+    n, d = a.shape
+    sq = np.einsum('ij,ij->i', a, a)
+    left = np.empty((n, d + 2), np.float32)
+    left[:, :d] = a
+    left[:, d] = sq
+    left[:, d + 1] = 1.0
+    right = np.empty((n, d + 2), np.float32)
+    np.multiply(a, -2.0, out=right[:, :d])
+    right[:, d] = 1.0
+    right[:, d + 1] = sq
+    return left, right
+
+
+def _chunk_by_first_pose(pairs: np.ndarray, self_poses: np.ndarray, workers: int
+                         ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Split the work into chunks: runs of pairs sharing the first pose, plus self checks.
+
+    Returns:
+        ``(pairs, self_poses)`` per chunk; each pose of ``self_poses`` (compared with
+        itself, ``same_pose``) goes to the chunk whose first poses bracket it.
+    """
+    self_poses = np.asarray(self_poses, dtype=np.int64)
     if len(pairs) == 0:
-        return []
+        return [(pairs, self_poses)] if len(self_poses) else []
     starts = np.flatnonzero(np.r_[True, pairs[1:, 0] != pairs[:-1, 0]])
     runs = np.split(pairs, starts[1:])
-    n_chunks = max(1, min(len(runs), 4 * workers if workers > 1 else 1))
+    n_chunks = max(1, min(len(runs), _CHUNKS_PER_WORKER * workers if workers > 1 else 1))
     bounds = np.linspace(0, len(runs), n_chunks + 1).round().astype(int)
-    return [np.concatenate(runs[s:e]) for s, e in zip(bounds[:-1], bounds[1:]) if e > s]
+    chunk_pairs = [np.concatenate(runs[s:e]) for s, e in zip(bounds[:-1], bounds[1:])
+                   if e > s]
+    first = np.array([c[0, 0] for c in chunk_pairs], dtype=np.int64)
+    owner = np.maximum(np.searchsorted(first, self_poses, side='right') - 1, 0)
+    return [(c, self_poses[owner == i]) for i, c in enumerate(chunk_pairs)]
 
 
-def _match_chunk(descriptors: list[np.ndarray], pairs: np.ndarray, tau2: float,
-                 ratio: float | None, check2: float
+def _chunk_descriptors(descriptors: list[np.ndarray], pairs: np.ndarray,
+                       self_poses: np.ndarray) -> dict[int, np.ndarray]:
+    """Return the descriptor arrays a chunk needs, by pose (what a worker task gets)."""
+    poses = np.unique(np.concatenate([pairs.ravel(), self_poses]))
+    return {int(v): descriptors[v] for v in poses}
+
+
+def _match_chunk(descriptors: Mapping[int, np.ndarray] | Sequence[np.ndarray],
+                 offsets: np.ndarray, pairs: np.ndarray, self_poses: np.ndarray,
+                 tau2: float, ratio: float | None, check2: float
                  ) -> tuple[np.ndarray, np.ndarray, int, int]:
-    """Match every pose pair of a chunk; return global feature ids.
+    """Match every pose pair of a chunk and its self poses; return global feature ids.
+
+    Args:
+        descriptors: by pose index, the descriptors (``uint8`` or float32) of at least
+            the poses of ``pairs`` and ``self_poses``.
+        offsets: ``(n_poses + 1,)`` first global feature id of each pose.
+        pairs: ``(p, 2)`` pose pairs ``v < w``, sorted by ``v``.
+        self_poses: poses whose features are compared with each other (``same_pose``).
+        tau2: squared tau.
+        ratio: optional Lowe ratio.
+        check2: squared radius of the symmetry check.
 
     Returns:
         ``(mutual (k, 2), broken (p,), tested, within_tau)`` with feature ids global
         over all poses (pose offsets added).
     """
-    counts = np.array([len(d) for d in descriptors], dtype=np.int64)
-    offsets = np.concatenate([[0], np.cumsum(counts)])
-    norms: dict[int, np.ndarray] = {}
+    counts = np.diff(offsets)
+    # Float32 augmented forms of the poses in use; pairs are sorted by their first pose,
+    # so a pose below the current first pose is never needed again and is dropped.
+    forms: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
-    def sq(v: int) -> np.ndarray:
-        if v not in norms:
-            norms[v] = np.einsum('ij,ij->i', descriptors[v], descriptors[v])
-        return norms[v]
+    def form(v: int) -> tuple[np.ndarray, np.ndarray]:
+        if v not in forms:
+            forms[v] = _augmented(descriptors[v])
+        return forms[v]
 
     mutual: list[np.ndarray] = []
     broken: list[np.ndarray] = []
     tested = within = 0
-    starts = np.flatnonzero(np.r_[True, pairs[1:, 0] != pairs[:-1, 0]])
-    for run in np.split(pairs, starts[1:]):
+    for v in np.asarray(self_poses, dtype=np.int64).tolist():
+        left, right = _augmented(descriptors[v])
+        broken.append(_repeated_from_augmented(left, right, tau2) + offsets[v])
+    starts = np.flatnonzero(np.r_[True, pairs[1:, 0] != pairs[:-1, 0]]) if len(pairs) \
+        else np.zeros(0, np.int64)
+    for run in np.split(pairs, starts[1:]) if len(pairs) else []:
         v = int(run[0, 0])
-        a = descriptors[v]
+        for stale in [u for u in forms if u < v]:
+            del forms[stale]
+        a = form(v)[0]
         partners = run[:, 1]
         # Stack the partners of v into products of at most _BLOCK_ENTRIES entries.
         sizes = counts[partners]
@@ -595,10 +678,9 @@ def _match_chunk(descriptors: list[np.ndarray], pairs: np.ndarray, tau2: float,
         if group:
             groups.append(group)
         for group in groups:
-            b = np.concatenate([descriptors[w] for w in group]) if len(group) > 1 \
-                else descriptors[group[0]]
-            b_sq = np.concatenate([sq(w) for w in group])
-            d2 = _squared_distances(a, sq(v), b, b_sq)
+            b = np.concatenate([form(w)[1] for w in group]) if len(group) > 1 \
+                else form(group[0])[1]
+            d2 = a @ b.T
             col = 0
             for w in group:
                 n_w = int(counts[w])
@@ -614,20 +696,16 @@ def _match_chunk(descriptors: list[np.ndarray], pairs: np.ndarray, tau2: float,
             np.concatenate(broken) if broken else empty, tested, within)
 
 
-_WORKER_DESCRIPTORS: list[np.ndarray] = []
-
-
-def _init_worker(descriptors: list[np.ndarray]) -> None:
-    global _WORKER_DESCRIPTORS
-    _WORKER_DESCRIPTORS = descriptors
+def _init_worker() -> None:
     set_blas_threads(1)
+    reuse_freed_memory()
 
 
 def _match_chunk_in_worker(
-        args: tuple[np.ndarray, float, float | None, float]
+        args: tuple[dict[int, np.ndarray], np.ndarray, np.ndarray, np.ndarray, float,
+                    float | None, float]
 ) -> tuple[np.ndarray, np.ndarray, int, int]:
-    pairs, tau2, ratio, check2 = args
-    return _match_chunk(_WORKER_DESCRIPTORS, pairs, tau2, ratio, check2)
+    return _match_chunk(*args)
 
 
 # -- input checks ----------------------------------------------------------------------
@@ -646,6 +724,9 @@ def _check_descriptors(pose_descriptors: Sequence[np.ndarray]) -> list[np.ndarra
             elif arr.shape[1] != dim:
                 raise VisibilityBuilderError(
                     f'descriptors of pose {i} have dimension {arr.shape[1]}, expected {dim}')
+        if arr.dtype == np.uint8:
+            out.append(np.ascontiguousarray(arr))
+            continue
         arr = np.ascontiguousarray(arr, dtype=np.float32)
         if not np.isfinite(arr).all():
             raise VisibilityBuilderError(f'descriptors of pose {i} contain NaN or inf')

@@ -23,6 +23,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from visibility_builder.allocator import reuse_freed_memory
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.images import EncodedImage, decode_image
 
@@ -131,6 +132,11 @@ def _init_worker(config: SiftConfig) -> None:
     _WORKER['detector'] = config.create()
 
 
+def _init_pool_worker(config: SiftConfig) -> None:
+    _init_worker(config)
+    reuse_freed_memory()  # SIFT's pyramid would be unmapped and faulted in per image
+
+
 def _extract_encoded(image: EncodedImage) -> ImageFeatures | str:
     try:
         gray = decode_image(image)
@@ -168,7 +174,7 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
     # spawn, not fork: the builder node runs this with rclpy's threads alive.
     context = multiprocessing.get_context('spawn')
     chunk = max(1, min(16, len(images) // (4 * workers)))
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_init_worker,
+    with ProcessPoolExecutor(workers, mp_context=context, initializer=_init_pool_worker,
                              initargs=(config,)) as pool:
         for result in pool.map(_extract_encoded, images, chunksize=chunk):
             results.append(result)
