@@ -136,12 +136,17 @@ class Localizer:
 
     # -- control --------------------------------------------------------------------------
     def reset(self) -> None:
-        """Forget the region and vote globally on the next frame."""
+        """Forget the region (and any /initialpose hint): vote globally on the next frame."""
         self.state, self.region, self.camera_pose = LOST, -1, None
+        self.hint = None
         self.tracker.reset()
         self.predictor.reset()
         self._failures = 0
         self.stats.resets += 1
+
+    def reset_motion(self) -> None:
+        """Forget the motion history (odometry restarted); the region is kept."""
+        self.predictor.reset()
 
     def set_hint(self, x: float, y: float, radius: float | None = None) -> None:
         """Restrict the next votes to regions near ``(x, y)`` (``/initialpose``)."""

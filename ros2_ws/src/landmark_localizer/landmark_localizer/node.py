@@ -436,7 +436,6 @@ def _make_node() -> Any:
 
         def _on_reinitialize(self, _request: Any, response: Any) -> Any:
             self.localizer.reset()
-            self.localizer.hint = None
             self.log.info('reinitialize_global_localization: region forgotten, voting '
                           'globally')
             return response
@@ -495,7 +494,7 @@ def _make_node() -> Any:
                 return
             odom = self._odometry_at(stamp)
             if restarted:
-                self.localizer.predictor.reset()
+                self.localizer.reset_motion()
             self.last_stamp = stamp
             estimate = self.localizer.step(Frame(stamp, image, odom))
             self.estimate = estimate
