@@ -35,9 +35,10 @@ stacked into products of at most 1e6 entries), nearest neighbours in both direct
 are an ``argmin`` along the rows and a column minimum, and the transitive closure is
 the connected components of the graph of mutual matches
 (:func:`scipy.sparse.csgraph.connected_components`). SIFT descriptors are integers in
-0..255 (``uint8``, kept so in memory and converted one pose at a time), so every
-product, norm and sum stays an integer below 2**24 and the float32 distances are exact:
-the result does not depend on the order of the arithmetic. With ``workers > 1`` the
+0..255 (``uint8``, kept so in memory and converted one pose at a time) with a norm of
+about 512, so every product, norm and partial sum stays an integer far below 2**24 and
+the float32 distances are exact: the result does not depend on the order of the
+arithmetic. With ``workers > 1`` the
 pose pairs are matched in a 'spawn' process pool (never forked: the builder node calls
 this from a thread while rclpy runs), each task receiving only the descriptors of the
 poses it compares. Complexity: O(sum over pairs of n_v n_w d) for the distances, O(N)
