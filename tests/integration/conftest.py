@@ -15,6 +15,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator
 import os
 from pathlib import Path
+import subprocess
 import sys
 
 import pytest
@@ -70,3 +71,20 @@ def ros_node(ros_domain_id: int) -> Iterator[RosTestNode]:
     node = RosTestNode('vbn_test', ros_domain_id)
     yield node
     node.close()
+
+
+@pytest.fixture(scope='session')
+def room_build(tmp_path_factory) -> dict:
+    """The room's database, built once per session with the defaults and shared.
+
+    ``vbn build bags/room_exploration`` with ``--report``: ``{'db', 'report', 'output'}``
+    (the database path, the report folder and what the command printed).
+    """
+    folder = tmp_path_factory.mktemp('room_build')
+    db = folder / 'room.db'
+    bag = Path(__file__).resolve().parents[2] / 'bags' / 'room_exploration'
+    proc = subprocess.run(['vbn', 'build', str(bag), '--db', str(db), '--report',
+                           str(folder / 'report'), '--scene', 'room', '--quiet'],
+                          capture_output=True, text=True, timeout=1200)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    return {'db': db, 'report': folder / 'report', 'output': proc.stdout}

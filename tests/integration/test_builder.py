@@ -35,16 +35,6 @@ def vbn(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope='session')
-def room_build(tmp_path_factory) -> dict:
-    folder = tmp_path_factory.mktemp('room_build')
-    db = folder / 'room.db'
-    proc = vbn('build', str(BAGS / 'room_exploration'), '--db', str(db), '--report',
-               str(folder / 'report'), '--scene', 'room', '--quiet')
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return {'db': db, 'report': folder / 'report', 'output': proc.stdout}
-
-
-@pytest.fixture(scope='session')
 def floor_build(tmp_path_factory) -> Path:
     db = tmp_path_factory.mktemp('floor_build') / 'floor.db'
     proc = vbn('build', str(BAGS / 'floor_exploration'), '--db', str(db), '--quiet',

@@ -20,7 +20,6 @@ pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
 BAGS = ROOT / 'bags'
-BUILD_SETTINGS: list[str] = []
 
 
 def vbn(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -28,12 +27,8 @@ def vbn(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
 
 
 @pytest.fixture(scope='session')
-def room_db(tmp_path_factory) -> Path:
-    db = tmp_path_factory.mktemp('localize_room') / 'room.db'
-    proc = vbn('build', str(BAGS / 'room_exploration'), '--db', str(db), '--quiet',
-               *BUILD_SETTINGS)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return db
+def room_db(room_build: dict) -> Path:
+    return room_build['db']  # the session's room database (conftest.py), defaults
 
 
 @pytest.fixture(scope='session')

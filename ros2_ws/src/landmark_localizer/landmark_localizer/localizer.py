@@ -32,7 +32,6 @@ from landmark_localizer.pose import PoseSolution, base_pose, refine_pose, solve_
 from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
-from visibility_builder.blas import single_threaded_blas
 from visibility_builder.features import SiftConfig, extract_features
 from visibility_builder.geometry.frames import invert_pose
 
@@ -156,15 +155,7 @@ class Localizer:
 
     # -- one frame ------------------------------------------------------------------------
     def step(self, frame: Frame) -> Estimate:
-        """Process one frame; return the estimate (never raises on a frame's content).
-
-        Runs OpenBLAS on one thread: the per-frame products are small and threads
-        only contend (:mod:`visibility_builder.blas`).
-        """
-        with single_threaded_blas():
-            return self._step(frame)
-
-    def _step(self, frame: Frame) -> Estimate:
+        """Process one frame; return the estimate (never raises on a frame's content)."""
         start = time.perf_counter()
         image = np.asarray(frame.image)
         if image.ndim != 2 or image.dtype != np.uint8 or min(image.shape) < 16:
