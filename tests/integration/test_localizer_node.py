@@ -30,21 +30,10 @@ WAIT = 120.0
 IMAGE_TOPIC = '/camera/image_raw/compressed'
 
 
-# Known problem (open, issue 9): with the databases the current builder makes, the node
-# processes far fewer frames over DDS than the same core offline (9 to 54 of 2,000 frames at
-# 100 Hz in test_memory_flat_over_2000_frames; 194 of 439 room_run frames), while
-# `vbn localize` keeps up with every frame (tests/integration/test_localize_offline.py).
-# The four throughput-bound tests are marked `bench` until that is found and fixed.
-
-
 @pytest.fixture(scope='session')
-def room_db(tmp_path_factory) -> Path:
-    db = tmp_path_factory.mktemp('localizer_db') / 'room.db'
-    proc = subprocess.run(['vbn', 'build', str(BAGS / 'room_exploration'), '--db', str(db),
-                           '--set', 'classes.tau=120', '--set', 'classes.symmetry_factor=1',
-                           '--quiet'], capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    return db
+def room_db(room_build: dict) -> Path:
+    """The session's room database (built once with the builder's defaults)."""
+    return room_build['db']
 
 
 def read_run(name: str) -> dict:
@@ -170,7 +159,6 @@ def spin_for(ros_node, seconds: float) -> None:
     ros_node.spin_until(lambda: False, timeout=seconds)
 
 
-@pytest.mark.bench  # node throughput regression, see the note below
 def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
                                                        ros_node) -> None:
     run = read_run('room_run')
@@ -252,7 +240,6 @@ def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
     assert 'Traceback' not in node.output
 
 
-@pytest.mark.bench  # node throughput regression, see the note below
 def test_kidnapped_run_with_sim_time(room_db, start_process, ros_node) -> None:
     run = read_run('room_run_kidnapped')
     start_localizer(start_process, room_db, 'use_sim_time:=true')
@@ -277,7 +264,6 @@ def test_kidnapped_run_with_sim_time(room_db, start_process, ros_node) -> None:
     assert abs(stamp_ns(listener.diagnostics[0].header.stamp) - start) < 100e9
 
 
-@pytest.mark.bench  # node throughput regression, see the note below
 def test_looping_bag_with_sim_time_resets_cleanly(room_db, start_process, ros_node) -> None:
     # The last 8 s of the run, looped at twice the speed, with /clock: time goes back at
     # each new pass, and the localizer starts again cleanly each time.
@@ -558,7 +544,6 @@ def memory_over(frames: int, room_db, start_process, ros_node, rate_hz: float = 
     assert growth < 1.10, samples
 
 
-@pytest.mark.bench  # node throughput regression, see the note below
 def test_memory_flat_over_2000_frames(room_db, start_process, ros_node) -> None:
     memory_over(2000, room_db, start_process, ros_node)
 

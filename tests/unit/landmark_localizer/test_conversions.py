@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import threading
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
@@ -13,7 +14,7 @@ from sensor_msgs.msg import CameraInfo
 from landmark_localizer import conversions
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Estimate
-from landmark_localizer.node import FrameStats, Warnings, reason_kind
+from landmark_localizer.node import FrameStats, Mailbox, Warnings, reason_kind
 from visibility_builder.geometry.camera import PanoramicCamera, PinholeCamera
 
 
@@ -144,10 +145,27 @@ def test_frame_stats_latency_window() -> None:
     stats = FrameStats(window=10)
     assert math.isnan(stats.latency_ms()['latency_p50_ms'])
     for ms in range(100):
-        stats.latency.append(ms / 1e3)
+        stats.add_latency(ms / 1e3)
     latency = stats.latency_ms()
     assert latency['latency_max_ms'] == pytest.approx(99.0)
     assert latency['latency_p50_ms'] == pytest.approx(94.5)
     stats.drop('decode')
     stats.drop('decode')
-    assert stats.dropped == {'decode': 2}
+    assert stats.dropped_counts() == {'decode': 2}
+
+
+def test_mailbox_keeps_only_the_newest_item_and_closes() -> None:
+    box = Mailbox()
+    assert box.put('a') == (False, None)
+    assert box.put('b') == (True, 'a')  # 'a' was never taken: replaced, dropped
+    assert box.take(timeout=0) == (True, 'b')
+    assert box.take(timeout=0.01) == (False, None)  # empty: nothing after the timeout
+    taken: list = []
+    worker = threading.Thread(target=lambda: taken.append(box.take()))
+    worker.start()
+    box.put('c')
+    worker.join(timeout=5)
+    assert taken == [(True, 'c')]
+    box.put('d')
+    box.close()
+    assert box.take() == (False, None)  # closed: the worker stops, even with an item

@@ -32,10 +32,15 @@ or message is dropped; a stamp more than a second back (a bag that loops) resets
 state. A database that is missing, of a newer version or damaged ends the node at
 start-up with ``localizer: error: ...`` on stderr and exit code 2.
 
-Two callback groups on a two-thread executor: frames (images, ``/initialpose``, the
-service, diagnostics: everything that touches the localizer) and odometry (``/odom``,
-CameraInfo, the transform timer), so that odometry keeps arriving while a frame is
-processed and each image finds the odometry of its own stamp.
+One thread spins a single-threaded executor and only files messages: odometry and
+CameraInfo into their buffers, each image into a one-slot mailbox (a newer image
+replaces one not yet taken: counted as dropped, ``overrun``). A worker thread takes the
+newest image, waits briefly for the odometry of its stamp and runs the localizer. The
+executor thus never holds a long callback: rclpy's multi-threaded executor, given a
+callback group busy with a frame, re-polls its wait set in Python without pause and
+took a whole core and most of the GIL from the frame it waited for (48 s of CPU over
+a 49 s replay of ``bags/room_run``, of which the localizer used 3 s; 65 of 439 frames
+processed).
 """
 from __future__ import annotations
 
@@ -56,7 +61,7 @@ from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from visibility_builder.ros_environment import check_ros_environment
 
-__all__ = ['IMAGE_TOPICS', 'NodeSettings', 'config_descriptions', 'main']
+__all__ = ['IMAGE_TOPICS', 'Mailbox', 'NodeSettings', 'config_descriptions', 'main']
 
 #: The image topics (fixed by the design, as the builder's).
 IMAGE_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed')
@@ -68,6 +73,8 @@ ODOM_MAX_EXTRAPOLATION_S = 0.1
 #: its stamp (which arrives on another topic, often a moment later), as tf2's message
 #: filter waits for a transform.
 ODOM_WAIT_S = 0.1
+#: How long ``destroy_node`` waits for the frame being processed.
+WORKER_JOIN_S = 5.0
 #: Frames in the latency window of /diagnostics.
 LATENCY_WINDOW = 200
 #: Seconds of images without any CameraInfo before the node says it uses the database's
@@ -173,7 +180,11 @@ def reason_kind(text: str) -> str:
 
 
 class FrameStats:
-    """What /diagnostics reports about the frames: counts, drops by reason, latency."""
+    """What /diagnostics reports about the frames: counts, drops by reason, latency.
+
+    The executor thread and the frame worker both write it, the diagnostics timer reads
+    it: drops and latencies go through a lock (each count has one writer).
+    """
 
     def __init__(self, window: int = LATENCY_WINDOW) -> None:
         self.received = 0
@@ -181,20 +192,70 @@ class FrameStats:
         self.poses = 0
         self.dropped: dict[str, int] = {}
         self.latency: deque[float] = deque(maxlen=window)
+        self._lock = threading.Lock()
 
     def drop(self, reason: str) -> None:
         """Count a dropped frame."""
-        self.dropped[reason] = self.dropped.get(reason, 0) + 1
+        with self._lock:
+            self.dropped[reason] = self.dropped.get(reason, 0) + 1
+
+    def dropped_counts(self) -> dict[str, int]:
+        """Return a copy of the drops by reason."""
+        with self._lock:
+            return dict(self.dropped)
+
+    def add_latency(self, seconds: float) -> None:
+        """Add one processed frame's latency to the window."""
+        with self._lock:
+            self.latency.append(seconds)
 
     def latency_ms(self) -> dict[str, float]:
         """p50, p95 and max of the per-frame latency over the window, milliseconds."""
-        if not self.latency:
+        with self._lock:
+            values = np.fromiter(self.latency, float) * 1e3
+        if not len(values):
             return {'latency_p50_ms': float('nan'), 'latency_p95_ms': float('nan'),
                     'latency_max_ms': float('nan')}
-        values = np.fromiter(self.latency, float) * 1e3
         p50, p95 = np.percentile(values, [50, 95])
         return {'latency_p50_ms': float(p50), 'latency_p95_ms': float(p95),
                 'latency_max_ms': float(values.max())}
+
+
+class Mailbox:
+    """One slot between the executor (``put``) and the frame worker (``take``).
+
+    A ``put`` while the slot is full replaces the waiting item and returns it (the caller
+    counts it as dropped): the worker always gets the newest frame and nothing queues.
+    """
+
+    def __init__(self) -> None:
+        self._ready = threading.Condition()
+        self._item: Any = None
+        self._full = False
+        self._closed = False
+
+    def put(self, item: Any) -> tuple[bool, Any]:
+        """Leave ``item``; return ``(replaced, the replaced item or None)``."""
+        with self._ready:
+            replaced, old = self._full, self._item
+            self._item, self._full = item, True
+            self._ready.notify()
+        return replaced, old
+
+    def take(self, timeout: float | None = None) -> tuple[bool, Any]:
+        """Wait for an item; ``(False, None)`` once closed (or after ``timeout``)."""
+        with self._ready:
+            self._ready.wait_for(lambda: self._full or self._closed, timeout=timeout)
+            if not self._full or self._closed:
+                return False, None
+            item, self._item, self._full = self._item, None, False
+            return True, item
+
+    def close(self) -> None:
+        """Wake the worker for good: every later ``take`` returns ``(False, None)``."""
+        with self._ready:
+            self._closed = True
+            self._ready.notify_all()
 
 
 def limit_malloc_arenas(arenas: int = _ARENAS) -> bool:
@@ -222,15 +283,13 @@ def main(args: list[str] | None = None) -> int:
         return 2
     limit_malloc_arenas()
     import rclpy
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
     rclpy.init(args=args)
     node = None
     try:
         node = _make_node()
-        executor = MultiThreadedExecutor(num_threads=2)
-        executor.add_node(node)
-        executor.spin()
+        rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except VbnError as error:
@@ -249,7 +308,6 @@ def _make_node() -> Any:
     from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
     from nav_msgs.msg import Odometry
     from rcl_interfaces.msg import ParameterDescriptor
-    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
     from rclpy.exceptions import ParameterException
     from rclpy.node import Node
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -293,6 +351,10 @@ def _make_node() -> Any:
             self.last_stamp: int | None = None
             self.transform: StampedTransform | None = None
             self.estimate = None
+            # The localizer is stepped by the worker and reset or hinted by callbacks.
+            self.localizer_lock = threading.Lock()
+            self.frames = Mailbox()
+            self.last_received: int | None = None  # stamp of the last image filed
 
             frame_qos = QoSProfile(
                 history=HistoryPolicy.KEEP_LAST, depth=1, durability=DurabilityPolicy.VOLATILE,
@@ -302,8 +364,6 @@ def _make_node() -> Any:
             # both); a lost odometry or camera-info message only widens a gap.
             sensor_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=50,
                                     reliability=ReliabilityPolicy.BEST_EFFORT)
-            frames = MutuallyExclusiveCallbackGroup()
-            inputs = MutuallyExclusiveCallbackGroup()
             self.pose_pub = self.create_publisher(PoseStamped, '/localizer/pose', 10)
             self.pose_cov_pub = self.create_publisher(
                 PoseWithCovarianceStamped, '/localizer/pose_with_covariance', 10)
@@ -313,23 +373,21 @@ def _make_node() -> Any:
                                                      LATCHED_QOS)
             self.tf = TransformBroadcaster(self) if self.settings.tf_broadcast else None
             self.create_subscription(Odometry, '/odom', self._guarded('/odom', self._on_odom),
-                                     sensor_qos, callback_group=inputs)
+                                     sensor_qos)
             self.create_subscription(CameraInfo, '/camera/camera_info',
                                      self._guarded('/camera/camera_info', self._on_camera_info),
-                                     sensor_qos, callback_group=inputs)
-            self.create_subscription(Image, IMAGE_TOPICS[0], self._on_image, frame_qos,
-                                     callback_group=frames)
+                                     sensor_qos)
+            self.create_subscription(Image, IMAGE_TOPICS[0], self._on_image, frame_qos)
             self.create_subscription(CompressedImage, IMAGE_TOPICS[1], self._on_image,
-                                     frame_qos, callback_group=frames)
+                                     frame_qos)
             self.create_subscription(PoseWithCovarianceStamped, '/initialpose',
-                                     self._guarded('/initialpose', self._on_initial_pose), 10,
-                                     callback_group=frames)
+                                     self._guarded('/initialpose', self._on_initial_pose), 10)
             self.create_service(Empty, '~/reinitialize_global_localization',
-                                self._on_reinitialize, callback_group=frames)
+                                self._on_reinitialize)
             if self.tf is not None and self.settings.transform_publish_period > 0:
                 self.create_timer(self.settings.transform_publish_period,
-                                  self._republish_transform, callback_group=inputs)
-            self.create_timer(1.0, self._publish_diagnostics, callback_group=frames)
+                                  self._republish_transform)
+            self.create_timer(1.0, self._publish_diagnostics)
             self.markers_pub.publish(region_markers(
                 database, frame_id=self.settings.global_frame_id,
                 stamp=self.get_clock().now().to_msg()))
@@ -338,6 +396,15 @@ def _make_node() -> Any:
                 f'localizer ready: {self.settings.db}: {database.n_regions} regions, '
                 f'k={self.index.k}, {self.index.n_classes} classes, camera {camera.width}x'
                 f'{camera.height} {camera.kind}; listening on {", ".join(IMAGE_TOPICS)}')
+            self.worker = threading.Thread(target=self._work, name='localizer-frames',
+                                           daemon=True)
+            self.worker.start()
+
+        def destroy_node(self) -> None:
+            self.frames.close()
+            if self.worker.is_alive():
+                self.worker.join(timeout=WORKER_JOIN_S)
+            super().destroy_node()
 
         # -- parameters ------------------------------------------------------------------
         def _read_parameters(self) -> tuple[NodeSettings, LocalizerConfig]:
@@ -430,12 +497,14 @@ def _make_node() -> Any:
                 self.warnings.warn('initialpose:' + reason_kind(str(error)),
                                    f'/initialpose: {error}: ignored')
                 return
-            self.localizer.set_hint(x, y, radius)
+            with self.localizer_lock:
+                self.localizer.set_hint(x, y, radius)
             self.log.info(f'/initialpose ({x:.2f}, {y:.2f}): voting among the regions '
                           f'within {radius:.2f} m')
 
         def _on_reinitialize(self, _request: Any, response: Any) -> Any:
-            self.localizer.reset()
+            with self.localizer_lock:
+                self.localizer.reset()
             self.log.info('reinitialize_global_localization: region forgotten, voting '
                           'globally')
             return response
@@ -446,14 +515,35 @@ def _make_node() -> Any:
             self.warnings.warn(f'{reason}:{reason_kind(text)}', f'frame dropped: {text}')
 
         def _on_image(self, msg: Any) -> None:
+            """File the image for the worker (the executor never waits for a frame)."""
             start = time.perf_counter()
             self.stats.received += 1
             try:
-                self._process(msg, start)
+                stamp = conversions.stamp_to_ns(msg.header.stamp)
             except Exception as error:  # noqa: BLE001 - a node reports, it does not die
-                if not self.context.ok():
-                    return  # shutting down: the publishers are gone
                 self._drop('error', f'{type(error).__name__}: {error}'.splitlines()[0])
+                return
+            if stamp == self.last_received:
+                self.stats.drop('repeated_stamp')  # the same frame on both topics
+                return
+            self.last_received = stamp
+            replaced, _ = self.frames.put((msg, start))
+            if replaced:
+                self.stats.drop('overrun')  # a newer frame came before it was taken
+
+        def _work(self) -> None:
+            """Localize the newest filed image, frame after frame, until the node ends."""
+            while True:
+                ok, item = self.frames.take()
+                if not ok:
+                    return
+                msg, start = item
+                try:
+                    self._process(msg, start)
+                except Exception as error:  # noqa: BLE001 - a node reports, it does not die
+                    if not self.context.ok():
+                        return  # shutting down: the publishers are gone
+                    self._drop('error', f'{type(error).__name__}: {error}'.splitlines()[0])
 
         def _process(self, msg: Any, start: float) -> None:
             stamp = conversions.stamp_to_ns(msg.header.stamp)
@@ -493,14 +583,15 @@ def _make_node() -> Any:
                            f'database camera {shape[1]}x{shape[0]}')
                 return
             odom = self._odometry_at(stamp)
-            if restarted:
-                self.localizer.reset_motion()
             self.last_stamp = stamp
-            estimate = self.localizer.step(Frame(stamp, image, odom))
+            with self.localizer_lock:
+                if restarted:
+                    self.localizer.reset_motion()
+                estimate = self.localizer.step(Frame(stamp, image, odom))
             self.estimate = estimate
             self.stats.processed += 1
             self._publish(estimate, odom)
-            self.stats.latency.append(time.perf_counter() - start)
+            self.stats.add_latency(time.perf_counter() - start)
 
         def _odometry_at(self, stamp: int) -> np.ndarray | None:
             def arrived() -> bool:
@@ -570,9 +661,10 @@ def _make_node() -> Any:
                 'resets': loc.stats.resets,
                 'odometry': odometry,
                 'camera_info': problem or ('matches' if self.camera_key else 'none'),
-                'frames_dropped': sum(self.stats.dropped.values()),
+                'frames_dropped': sum(self.stats.dropped_counts().values()),
             }
-            values.update({f'dropped_{k}': v for k, v in sorted(self.stats.dropped.items())})
+            dropped = self.stats.dropped_counts()
+            values.update({f'dropped_{k}': v for k, v in sorted(dropped.items())})
             level = DiagnosticStatus.OK if state == TRACKING and not problem else \
                 DiagnosticStatus.WARN
             message = f'TRACKING region {loc.region}' if state == TRACKING else 'LOST'
