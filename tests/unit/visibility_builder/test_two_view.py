@@ -4,6 +4,8 @@ from __future__ import annotations
 import math
 
 import cv2
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
 from two_view_samples import random_pose_near, render_views
@@ -19,11 +21,13 @@ from visibility_builder.geometry import (
 from visibility_builder.geometry.frames import BASE_TO_CAMERA_ROTATION
 from visibility_builder.geometry.two_view import (
     TwoViewConfig,
+    _planar_sampson,
     general_essential,
     linear_combination_of_views,
     panoramic_planar_motion,
     pinhole_planar_essential,
     planar_epipolar_residuals,
+    pointwise_planar_residuals,
     relative_motion,
 )
 
@@ -349,3 +353,38 @@ def test_linear_combination_of_views_refuses_degenerate_input():
         linear_combination_of_views(-rays[0], rays[1], rays[2], np.array([0.0, 1.0, 0.3]))
     with pytest.raises(VisibilityBuilderError, match='pose_b_in_a'):
         linear_combination_of_views(rays[0], rays[1], rays[2], np.array([0.0, 1.0]))
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_pointwise_residuals_equal_each_motions_own(seed: int) -> None:
+    """The closed form per correspondence equals the essential matrix's Sampson error."""
+    rng = np.random.default_rng(seed)
+    f1, f2 = rng.normal(size=(2, 12, 3))
+    f1 /= np.linalg.norm(f1, axis=1, keepdims=True)
+    f2 /= np.linalg.norm(f2, axis=1, keepdims=True)
+    theta, phi = rng.uniform(-math.pi, math.pi, size=(2, 12))
+    each = [planar_epipolar_residuals(f1[i:i + 1], f2[i:i + 1], theta[i], phi[i])[0]
+            for i in range(12)]
+    assert np.allclose(pointwise_planar_residuals(f1, f2, theta, phi), each, atol=1e-12)
+    # Every motion scored on every correspondence (the robust solvers' form).
+    grid = _planar_sampson(f1 @ BASE_TO_CAMERA_ROTATION.T, f2 @ BASE_TO_CAMERA_ROTATION.T,
+                           theta[:3, None], phi[:3, None])
+    assert grid.shape == (3, 12)
+    for k in range(3):
+        assert np.allclose(grid[k], planar_epipolar_residuals(f1, f2, theta[k], phi[k]),
+                           atol=1e-12)
+
+
+def test_pointwise_residuals_vanish_on_an_exact_planar_motion() -> None:
+    # The current camera 1 m ahead of the model camera (phi = 0), turned 90 degrees: a
+    # point at (2, 1, 0.5) in the model's planar frame is (1, -1, 0.5) seen from the
+    # current camera's position, (1, -1, 0.5) in its own planar frame turned +90 degrees.
+    m = BASE_TO_CAMERA_ROTATION
+    model = np.array([2.0, 1.0, 0.5])
+    current = np.array([1.0, -1.0, 0.5])
+    f1 = (m.T @ model / np.linalg.norm(model))[None]
+    f2 = (m.T @ current / np.linalg.norm(current))[None]
+    assert abs(pointwise_planar_residuals(f1, f2, np.array([math.pi / 2]),
+                                          np.array([0.0]))[0]) < 1e-12
+    assert abs(pointwise_planar_residuals(f1, f2, np.array([0.0]), np.array([0.0]))[0]) > 0.1

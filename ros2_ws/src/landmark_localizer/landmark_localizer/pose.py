@@ -197,15 +197,31 @@ def _correspondences(index: DatabaseIndex, region: RegionData, class_ids: np.nda
                             np.concatenate(model), np.concatenate(current))
 
 
-def _residuals(pose: np.ndarray, data: _Correspondences) -> np.ndarray:
-    """Sampson errors of every correspondence with the camera at ``pose``."""
+def _residuals(poses: np.ndarray, data: _Correspondences) -> np.ndarray:
+    """Sampson errors of every correspondence, ``(m, n)`` for ``m`` camera poses.
+
+    Several poses (the current one and its finite-difference probes) go through one
+    vectorised pass: the refinement's cost is numpy's call overhead, not arithmetic.
+    """
+    poses = np.atleast_2d(poses)
     vp = data.view_poses
-    dx, dy = pose[0] - vp[:, 0], pose[1] - vp[:, 1]
+    dx = poses[:, None, 0] - vp[None, :, 0]
+    dy = poses[:, None, 1] - vp[None, :, 1]
     c, s = np.cos(vp[:, 2]), np.sin(vp[:, 2])
-    theta = wrap_angle(pose[2] - vp[:, 2])
+    theta = wrap_angle(poses[:, None, 2] - vp[None, :, 2])
     phi = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
-    return pointwise_planar_residuals(data.rays_model, data.rays_current,
-                                      theta[data.view], phi[data.view])
+    m = len(poses)
+    r = pointwise_planar_residuals(np.tile(data.rays_model, (m, 1)),
+                                   np.tile(data.rays_current, (m, 1)),
+                                   theta[:, data.view].ravel(), phi[:, data.view].ravel())
+    return r.reshape(m, -1)
+
+
+def _residuals_and_jacobian(pose: np.ndarray, data: _Correspondences, step: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """Residuals at ``pose`` and their forward-difference Jacobian ``(n, 3)``."""
+    both = _residuals(np.vstack([pose, pose + np.diag(step)]), data)
+    return both[0], ((both[1:] - both[0]) / step[:, None]).T
 
 
 def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
@@ -236,13 +252,9 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     threshold = 0.75 * config.max_residual_px / focal
     pose = np.asarray(initial, float).copy()
     step = np.array([1e-4, 1e-4, 1e-5])
-    probes = pose + np.diag(step)
     for _ in range(iterations):
-        r = _residuals(pose, data)
+        r, jac = _residuals_and_jacobian(pose, data, step)
         weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
-        probes = pose + np.diag(step)
-        jac = np.stack([(_residuals(p, data) - r) / h for p, h in zip(probes, step,
-                                                                      strict=True)], axis=1)
         jw = jac * weights[:, None]
         try:
             delta = np.linalg.solve(jw.T @ jac + 1e-12 * np.eye(3), -(jw.T @ r))
@@ -252,7 +264,7 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         pose[2] = float(wrap_angle(pose[2]))
         if np.abs(delta[:2]).max() < 1e-5 and abs(delta[2]) < 1e-6:
             break
-    r = _residuals(pose, data)
+    r, jac = _residuals_and_jacobian(pose, data, step)
     inlier = np.abs(r) <= 2.0 * threshold
     per_view = np.bincount(data.view[inlier], minlength=len(data.view_poses))
     if int((per_view >= config.min_inliers).sum()) < 2:
@@ -260,9 +272,7 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     rms_px = float(np.sqrt(np.mean(r[inlier] ** 2)) * focal)
     if not rms_px <= config.max_residual_px:
         return None
-    probes = pose + np.diag(step)
-    jac = np.stack([(_residuals(p, data)[inlier] - r[inlier]) / h
-                    for p, h in zip(probes, step, strict=True)], axis=1)
+    jac = jac[inlier]
     sigma2 = max(float(np.mean(r[inlier] ** 2)), (0.1 / focal) ** 2)
     try:
         cov = sigma2 * np.linalg.inv(jac.T @ jac)

@@ -236,22 +236,6 @@ def _essential(theta: float, phi: float) -> np.ndarray:
     return _skew(T) @ R
 
 
-def _essentials(theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """Return ``(m, 3, 3)`` essential matrices of planar motions (vectorised)."""
-    c, s = np.cos(theta), np.sin(theta)
-    zero, one = np.zeros_like(c), np.ones_like(c)
-    rz_t = np.stack([np.stack([c, s, zero], -1), np.stack([-s, c, zero], -1),
-                     np.stack([zero, zero, one], -1)], -2)                  # R_z(theta)^T
-    centre = np.stack([np.cos(phi), np.sin(phi), zero], -1)
-    R = _M.T @ rz_t @ _M
-    T = -np.einsum('ij,mjk,mk->mi', _M.T, rz_t, centre)
-    skew = np.zeros_like(R)
-    skew[:, 0, 1], skew[:, 0, 2] = -T[:, 2], T[:, 1]
-    skew[:, 1, 0], skew[:, 1, 2] = T[:, 2], -T[:, 0]
-    skew[:, 2, 0], skew[:, 2, 1] = -T[:, 1], T[:, 0]
-    return skew @ R
-
-
 def _sampson(E: np.ndarray, f_model: np.ndarray, f_current: np.ndarray) -> np.ndarray:
     """Return signed Sampson errors of ``f_cur^T E f_model = 0`` on the unit sphere.
 
@@ -303,14 +287,33 @@ def pointwise_planar_residuals(rays_model: np.ndarray, rays_current: np.ndarray,
     Returns:
         ``(n,)`` signed errors, radians.
     """
-    f1 = np.asarray(rays_model, dtype=float)
-    f2 = np.asarray(rays_current, dtype=float)
-    E = _essentials(np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
-    e_f1 = np.einsum('nij,nj->ni', E, f1)
-    et_f2 = np.einsum('nji,nj->ni', E, f2)
-    algebraic = np.einsum('ni,ni->n', f2, e_f1)
-    a2 = algebraic * algebraic
-    denom2 = np.einsum('ni,ni->n', e_f1, e_f1) + np.einsum('ni,ni->n', et_f2, et_f2) - 2.0 * a2
+    return _planar_sampson(np.asarray(rays_model, dtype=float) @ _M.T,
+                           np.asarray(rays_current, dtype=float) @ _M.T,
+                           np.asarray(theta, dtype=float), np.asarray(phi, dtype=float))
+
+
+def _planar_sampson(g1: np.ndarray, g2: np.ndarray, theta: np.ndarray, phi: np.ndarray
+                    ) -> np.ndarray:
+    """Sampson errors of planar motions from rays in the planar frame, broadcasting.
+
+    ``g1``, ``g2``: ``(n, 3)`` unit rays (z up); ``theta``, ``phi`` broadcast against
+    ``(n,)``: ``(n,)`` for one motion per correspondence, ``(m, 1)`` for ``m`` motions
+    scored on every correspondence (``(m, n)`` errors). In the planar frame
+    ``E = [T]x Rz(theta)^T`` with ``T = -(cos psi, sin psi, 0)``, ``psi = phi - theta``,
+    and for unit rays ``|E g1|^2 = 1 - (T.h)^2`` (``h = Rz(theta)^T g1``) and
+    ``|E^T g2|^2 = 1 - (T.g2)^2``: no matrix per motion is formed (equal to
+    :func:`planar_epipolar_residuals`, ``tests/unit/visibility_builder/test_two_view.py``).
+    """
+    c, s = np.cos(theta), np.sin(theta)
+    hx = c * g1[:, 0] + s * g1[:, 1]
+    hy = c * g1[:, 1] - s * g1[:, 0]
+    psi = phi - theta
+    tx, ty = -np.cos(psi), -np.sin(psi)
+    hz = g1[:, 2]
+    algebraic = hz * (g2[:, 0] * ty - g2[:, 1] * tx) + g2[:, 2] * (tx * hy - ty * hx)
+    t_h = tx * hx + ty * hy
+    t_g2 = tx * g2[:, 0] + ty * g2[:, 1]
+    denom2 = 2.0 - t_h * t_h - t_g2 * t_g2 - 2.0 * algebraic * algebraic
     return algebraic / np.sqrt(np.maximum(denom2, 1e-300))
 
 
@@ -410,7 +413,8 @@ def _residual_jacobian(x: np.ndarray, f_model: np.ndarray, f_current: np.ndarray
     """Residuals at ``x`` and their central-difference Jacobian, in one batched pass."""
     offsets = np.array([[0.0, 0.0], [h, 0.0], [-h, 0.0], [0.0, h], [0.0, -h]])
     points = x + offsets
-    err = _sampson(_essentials(points[:, 0], points[:, 1]), f_model, f_current)  # (5, n)
+    err = _planar_sampson(f_model @ _M.T, f_current @ _M.T, points[:, :1],
+                          points[:, 1:])                                   # (5, n)
     J = np.stack([err[1] - err[2], err[3] - err[4]], axis=1) / (2.0 * h)
     return err[0], J
 
@@ -649,10 +653,10 @@ def panoramic_planar_motion(rays_model: np.ndarray, rays_current: np.ndarray, *,
     # Score the candidates near the modes on every usable correspondence (MSAC).
     scores = np.empty(len(thetas))
     fu1, fu2 = f1[idx], f2[idx]
+    gu1, gu2 = fu1 @ _M.T, fu2 @ _M.T
     for start in range(0, len(thetas), 512):
         sl = slice(start, start + 512)
-        Es = _essentials(thetas[sl], phis[sl])
-        err = _sampson(Es, fu1, fu2)
+        err = _planar_sampson(gu1, gu2, thetas[sl, None], phis[sl, None])
         scores[sl] = np.sum(np.minimum(err * err, threshold * threshold), axis=1)
     best = int(np.argmin(scores))
     theta = float(thetas[best])
