@@ -40,3 +40,11 @@ def test_bad_node_settings_are_one_line_errors() -> None:
         NodeSettings(transform_tolerance=float('nan'))
     with pytest.raises(LocalizerError, match='three different names'):
         NodeSettings(odom_frame_id='map')
+
+
+@pytest.mark.parametrize(('name', 'value', 'message'), [
+    ('vote_scale', 0.0, 'vote_scale must be in'), ('vote_scale', 1.5, 'vote_scale must be in'),
+    ('vote_checks', -1, 'vote_checks must be >= 0'), ('lk_window', 20, 'must be odd')])
+def test_bad_core_settings_are_one_line_errors(name: str, value: object, message: str) -> None:
+    with pytest.raises(LocalizerError, match=message):
+        LocalizerConfig().with_values({name: value})

@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.features import ImageFeatures, SiftConfig, extract_features, extract_many
+from visibility_builder.features import (
+    ImageFeatures,
+    SiftConfig,
+    extract_features,
+    extract_features_scaled,
+    extract_many,
+)
 from visibility_builder.images import EncodedImage
 
 
@@ -54,3 +60,26 @@ def test_extract_many_in_order_with_undecodable_images_reported() -> None:
             assert np.array_equal(a.keypoints, b.keypoints)
         else:
             assert a == b
+
+
+def test_scaled_features_are_in_full_image_pixels_and_match_full_size_ones() -> None:
+    image = cv2.resize(textured(3, (128, 256)), None, fx=2, fy=2,
+                       interpolation=cv2.INTER_CUBIC)  # smooth enough to survive halving
+    full = extract_features(image)
+    half = extract_features_scaled(image, 0.5)
+    assert 0 < len(half) < len(full)
+    # Each half-size keypoint lies on a full-size one of about its size, and most of
+    # their descriptors are each other's nearest neighbours (what voting relies on).
+    d = np.linalg.norm(half.keypoints[:, None] - full.keypoints[None], axis=2)
+    nearest = d.argmin(axis=1)
+    close = d.min(axis=1) <= 2.0
+    assert close.mean() > 0.8
+    size_ratio = half.sizes[close] / full.sizes[nearest[close]]
+    assert np.median(size_ratio) == pytest.approx(1.0, abs=0.15)
+    dist = np.linalg.norm(half.descriptors[close, None].astype(float)
+                          - full.descriptors[None].astype(float), axis=2)
+    assert (dist.argmin(axis=1) == nearest[close]).mean() > 0.6
+    same = extract_features_scaled(image, 1.0)
+    assert np.array_equal(same.keypoints, full.keypoints)
+    with pytest.raises(ValueError, match='scale must be in'):
+        extract_features_scaled(image, 0.0)

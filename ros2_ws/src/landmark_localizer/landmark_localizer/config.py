@@ -24,6 +24,11 @@ class LocalizerConfig:
         vote_ratio: Lowe's ratio between the best and second-best class of a query
             feature when voting.
         vote_max_distance: largest SIFT distance of a vote.
+        vote_scale: the image is resized by this for voting's SIFT (0.5: a fifth of the
+            time; the matched features are then re-anchored on full-size keypoints);
+            1 votes on the full image.
+        vote_checks: FLANN leaves visited per feature when voting (0: exact matching
+            against every class descriptor, whose cost grows with the database).
         vote_min_votes: least votes of a candidate region; 0 means the database's k.
         vote_candidates: candidate regions verified geometrically, most votes first.
         verify_ratio: ratio test when matching the current image to a model view.
@@ -40,7 +45,8 @@ class LocalizerConfig:
         redetect_cooldown: a feature searched in vain is not searched again for this
             many frames.
         switch_redetect: at most this many of the new region's features searched at a
-            switch.
+            switch (only as many as bring the tracks to twice ``min_tracked``, at least
+            ``redetect_per_frame``).
         refresh_per_frame: tracked features re-anchored on a SIFT keypoint per frame
             (round robin; bounds Lucas-Kanade drift).
         redetect_max_distance: largest SIFT distance of a re-detected feature.
@@ -60,6 +66,8 @@ class LocalizerConfig:
     method: str = ''
     vote_ratio: float = 0.85
     vote_max_distance: float = 250.0
+    vote_scale: float = 0.5
+    vote_checks: int = 64
     vote_min_votes: int = 0
     vote_candidates: int = 4
     verify_ratio: float = 0.85
@@ -91,12 +99,14 @@ class LocalizerConfig:
         if self.method not in ('', 'panoramic_planar', 'pinhole_planar', 'general_essential'):
             raise LocalizerError(f'unknown method {self.method!r} (expected panoramic_planar, '
                                  f'pinhole_planar, general_essential or empty)')
-        for name in ('vote_ratio', 'verify_ratio'):
+        for name in ('vote_ratio', 'verify_ratio', 'vote_scale'):
             if not 0 < getattr(self, name) <= 1:
                 raise LocalizerError(f'{name} must be in (0, 1], got {getattr(self, name)}')
         for name in ('vote_candidates', 'min_inliers', 'min_tracked', 'lk_window'):
             if getattr(self, name) < 1:
                 raise LocalizerError(f'{name} must be >= 1, got {getattr(self, name)}')
+        if self.vote_checks < 0:
+            raise LocalizerError(f'vote_checks must be >= 0, got {self.vote_checks}')
         if self.lk_window % 2 == 0:
             raise LocalizerError(f'lk_window must be odd, got {self.lk_window}')
 

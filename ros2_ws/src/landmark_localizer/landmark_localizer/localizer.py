@@ -32,7 +32,7 @@ from landmark_localizer.pose import PoseSolution, base_pose, refine_pose, solve_
 from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
-from visibility_builder.features import SiftConfig, extract_features
+from visibility_builder.features import SiftConfig, extract_features_scaled
 from visibility_builder.geometry.frames import invert_pose
 
 __all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
@@ -186,7 +186,8 @@ class Localizer:
     # -- LOST: voting ---------------------------------------------------------------------
     def _best_verified(self, image: np.ndarray, allowed: np.ndarray | None
                        ) -> Verified | None:
-        features = extract_features(image, self.sift, self.detector)
+        features = extract_features_scaled(image, self.config.vote_scale, self.sift,
+                                           self.detector)
         self.stats.votes += 1
         best: Verified | None = None
         for candidate in vote(features, self.index, self.config, allowed):
@@ -199,11 +200,24 @@ class Localizer:
 
     def _start(self, found: Verified, frame: Frame) -> None:
         self.state, self.region = TRACKING, found.region
-        self.tracker.set_region(self.index.regions[found.region])
-        self.tracker.tracks = Tracks(found.class_ids, found.uv.astype(np.float32))
-        self._last_solution = found.solution
+        region = self.index.regions[found.region]
+        self.tracker.set_region(region)
+        tracks = Tracks(found.class_ids, found.uv.astype(np.float32))
+        solution = found.solution
+        if self.config.vote_scale < 1.0:
+            # Voting's keypoints come from the smaller image: put the tracks back on
+            # full-size SIFT keypoints and polish the pose on them.
+            radius = 1.0 / self.config.vote_scale + 1.0
+            tracks = self._reanchor(np.asarray(frame.image), tracks,
+                                    np.arange(len(tracks)), radius)
+            polished = refine_pose(self.index, region, tracks.class_ids,
+                                   tracks.uv.astype(float), solution.estimate.pose,
+                                   self.config)
+            solution = polished or solution
+        self.tracker.tracks = tracks
+        self._last_solution = solution
         self._failures = 0
-        self.camera_pose = found.solution.estimate.pose
+        self.camera_pose = solution.estimate.pose
         self.predictor.reset()
 
     def _allowed_by_hint(self) -> np.ndarray | None:
@@ -303,14 +317,19 @@ class Localizer:
             found = self.tracker.search(image, missing[order], uv[order],
                                         config.redetect_radius_px)
             tracks = tracks.merged(found)
-        refresh = self.tracker.refresh_candidates(tracks)
-        if refresh.size:
-            again = self.tracker.search(image, tracks.class_ids[refresh], tracks.uv[refresh],
-                                        2.0, remember=False)
-            if len(again):
-                position = {int(c): i for i, c in enumerate(tracks.class_ids)}
-                for c, uv in zip(again.class_ids, again.uv, strict=True):
-                    tracks.uv[position[int(c)]] = uv
+        return self._reanchor(image, tracks, self.tracker.refresh_candidates(tracks), 2.0)
+
+    def _reanchor(self, image: np.ndarray, tracks: Tracks, which: np.ndarray, radius: float
+                  ) -> Tracks:
+        """Move the tracks ``which`` onto the matching SIFT keypoint within ``radius``."""
+        if not len(which):
+            return tracks
+        again = self.tracker.search(image, tracks.class_ids[which], tracks.uv[which],
+                                    radius, remember=False)
+        if len(again):
+            position = {int(c): i for i, c in enumerate(tracks.class_ids)}
+            for c, uv in zip(again.class_ids, again.uv, strict=True):
+                tracks.uv[position[int(c)]] = uv
         return tracks
 
     def _maybe_switch(self, frame: Frame, region: int) -> None:
@@ -344,7 +363,12 @@ class Localizer:
         # Landmark features first: they are the ones every pose of the region sees.
         order = np.flatnonzero(ok)
         order = order[np.argsort(~np.isin(missing[order], region.landmark), kind='stable')]
-        order = order[:self.config.switch_redetect]
+        # Only as many windows as bring the tracks to twice min_tracked (each window is a
+        # SIFT run); the per-frame re-detection finds the rest over the next frames.
+        config = self.config
+        wanted = np.clip(2 * config.min_tracked - len(tracks), config.redetect_per_frame,
+                         config.switch_redetect)
+        order = order[:wanted]
         found = self.tracker.search(frame.image, missing[order], uv[order],
                                     self.config.redetect_radius_px)
         return tracks.merged(found)

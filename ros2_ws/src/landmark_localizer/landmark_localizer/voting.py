@@ -5,9 +5,10 @@ according to a membership relationship computed off-line. The region in which th
 robot is will be assumed to be one of those with at least k votes" (7.1, 3.1.4).
 
 :func:`vote`: every SIFT feature of the current image is matched to the class index
-(each class's representative descriptors; Lowe's ratio against the nearest *other*
-class); each matched class votes for the regions it belongs to (landmark or extra);
-candidates need ``vote_min_votes`` votes (default: the database's k).
+(each class's representative descriptors, through the index's FLANN forest; Lowe's
+ratio against the nearest *other* class); each matched class votes for the regions it
+belongs to (landmark or extra); candidates need ``vote_min_votes`` votes (default: the
+database's k).
 
 :func:`verify`: a candidate is checked geometrically: the image's features are matched
 to each of the region's model views with the symmetry check the thesis suggests
@@ -25,7 +26,7 @@ import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
-from landmark_localizer.matching import grouped_nearest, mutual_matches, squared_distances
+from landmark_localizer.matching import mutual_matches
 from landmark_localizer.pose import PoseSolution, solve_pose
 from visibility_builder.features import ImageFeatures
 
@@ -74,9 +75,8 @@ def vote(features: ImageFeatures, index: DatabaseIndex, config: LocalizerConfig,
     """
     if len(features) == 0:
         return []
-    d2 = squared_distances(features.descriptors, index.descriptors, index.descriptor_norms)
-    best, d1, d_other = grouped_nearest(d2, index.descriptor_class, index.n_classes)
-    good = (d1 <= config.vote_max_distance) & (d1 < config.vote_ratio * d_other)
+    best, d1, d_other = index.nearest_classes(features.descriptors, config.vote_checks)
+    good = (best >= 0) & (d1 <= config.vote_max_distance) & (d1 < config.vote_ratio * d_other)
     matched = np.zeros(index.n_classes, np.float64)
     matched[np.unique(best[good])] = 1.0
     votes = np.asarray(index.membership.T @ matched).ravel().astype(int)

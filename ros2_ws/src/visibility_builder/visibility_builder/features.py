@@ -27,7 +27,8 @@ from visibility_builder.allocator import reuse_freed_memory
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.images import EncodedImage, decode_image
 
-__all__ = ['ImageFeatures', 'SiftConfig', 'extract_features', 'extract_many']
+__all__ = ['ImageFeatures', 'SiftConfig', 'extract_features', 'extract_features_scaled',
+           'extract_many']
 
 
 @dataclass(frozen=True)
@@ -121,6 +122,37 @@ def extract_features(image: np.ndarray, config: SiftConfig = SiftConfig(),
         angles=np.array([k.angle for k in keypoints], np.float32)[order],
         responses=responses[order],
         descriptors=np.clip(np.rint(descriptors[order]), 0, 255).astype(np.uint8))
+
+
+def extract_features_scaled(image: np.ndarray, scale: float, config: SiftConfig = SiftConfig(),
+                            detector: Any = None) -> ImageFeatures:
+    """SIFT on the image resized by ``scale``, keypoints given in the full image's pixels.
+
+    SIFT is scale invariant, so the descriptors still match those of full-size images
+    (of the features larger than the finest scales the smaller image loses): at 0.5 it
+    costs about a fifth (17 against 95 ms on a 1024 x 256 panorama here) and keeps the
+    features voting needs. Positions are less precise by ``1 / scale``; whoever needs
+    SIFT's precision re-detects at full size where these fall.
+
+    Args:
+        image: (H, W) uint8 grey image.
+        scale: In (0, 1]; 1 is :func:`extract_features`.
+        config: SIFT settings (ignored when ``detector`` is given).
+        detector: A detector from :meth:`SiftConfig.create`.
+
+    Returns:
+        The features, keypoints and sizes in the full image's pixels.
+    """
+    if not 0.0 < scale <= 1.0:
+        raise ValueError(f'scale must be in (0, 1], got {scale}')
+    if scale == 1.0:
+        return extract_features(image, config, detector)
+    small = cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+    found = extract_features(small, config, detector)
+    # Pixel centres: small pixel i spans full pixels [i / scale, (i + 1) / scale).
+    return ImageFeatures(keypoints=((found.keypoints + 0.5) / scale - 0.5).astype(np.float32),
+                         sizes=(found.sizes / scale).astype(np.float32), angles=found.angles,
+                         responses=found.responses, descriptors=found.descriptors)
 
 
 _WORKER: dict[str, Any] = {}
