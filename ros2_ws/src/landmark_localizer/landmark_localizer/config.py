@@ -44,9 +44,10 @@ class LocalizerConfig:
         redetect_per_frame: at most this many lost features searched per frame.
         redetect_cooldown: a feature searched in vain is not searched again for this
             many frames.
-        switch_redetect: at most this many of the new region's features searched at a
-            switch (only as many as bring the tracks to twice ``min_tracked``, at least
-            ``redetect_per_frame``).
+        switch_redetect: at most this many of the next region's features searched
+            for a switch, spread over the frames before it.
+        handover_frames: a switch prepares the next region's features over at most
+            this many frames (make before break).
         refresh_per_frame: tracked features re-anchored on a SIFT keypoint per frame
             (round robin; bounds Lucas-Kanade drift).
         redetect_max_distance: largest SIFT distance of a re-detected feature.
@@ -81,6 +82,7 @@ class LocalizerConfig:
     redetect_per_frame: int = 3
     redetect_cooldown: int = 10
     switch_redetect: int = 12
+    handover_frames: int = 3
     refresh_per_frame: int = 4
     redetect_max_distance: float = 280.0
     predict_horizon_s: float = 0.6
@@ -102,7 +104,8 @@ class LocalizerConfig:
         for name in ('vote_ratio', 'verify_ratio', 'vote_scale'):
             if not 0 < getattr(self, name) <= 1:
                 raise LocalizerError(f'{name} must be in (0, 1], got {getattr(self, name)}')
-        for name in ('vote_candidates', 'min_inliers', 'min_tracked', 'lk_window'):
+        for name in ('vote_candidates', 'min_inliers', 'min_tracked', 'lk_window',
+                     'handover_frames'):
             if getattr(self, name) < 1:
                 raise LocalizerError(f'{name} must be >= 1, got {getattr(self, name)}')
         if self.vote_checks < 0:

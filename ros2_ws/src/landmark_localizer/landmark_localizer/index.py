@@ -18,7 +18,7 @@ Nothing here depends on the size of the database at run time except voting in LO
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 from typing import Any
 
@@ -73,6 +73,7 @@ class RegionData:
         features: (k + e,) landmark then extra class ids.
         landmark: (k,) landmark class ids.
         views: Its model views.
+        view_classes: Sorted classes at least one of its model views shows.
     """
 
     index: int
@@ -80,6 +81,11 @@ class RegionData:
     features: np.ndarray
     landmark: np.ndarray
     views: tuple[ViewData, ...]
+    view_classes: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        seen = [v.class_ids for v in self.views] or [np.zeros(0, np.int64)]
+        object.__setattr__(self, 'view_classes', np.unique(np.concatenate(seen)))
 
 
 class _CameraInfo:

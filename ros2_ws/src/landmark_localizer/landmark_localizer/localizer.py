@@ -141,6 +141,7 @@ class Localizer:
         self.tracker.reset()
         self.predictor.reset()
         self._failures = 0
+        self._handover = -1
         self.stats.resets += 1
 
     def reset_motion(self) -> None:
@@ -151,6 +152,7 @@ class Localizer:
         """Restrict the next votes to regions near ``(x, y)`` (``/initialpose``)."""
         self.hint = (np.array([x, y], float), radius or self.config.hint_radius_m)
         self.state, self.region = LOST, -1
+        self._handover = -1
         self.tracker.reset()
 
     # -- one frame ------------------------------------------------------------------------
@@ -199,7 +201,7 @@ class Localizer:
         return best
 
     def _start(self, found: Verified, frame: Frame) -> None:
-        self.state, self.region = TRACKING, found.region
+        self.state, self.region, self._handover = TRACKING, found.region, -1
         region = self.index.regions[found.region]
         self.tracker.set_region(region)
         tracks = Tracks(found.class_ids, found.uv.astype(np.float32))
@@ -214,11 +216,14 @@ class Localizer:
                                    tracks.uv.astype(float), solution.estimate.pose,
                                    self.config)
             solution = polished or solution
-        self.tracker.tracks = tracks
         self._last_solution = solution
         self._failures = 0
         self.camera_pose = solution.estimate.pose
         self.predictor.reset()
+        # The vote matched some of the region's features; look for the others where
+        # the pose puts them (a LOST frame has the time), as a switch does.
+        self.tracker.tracks, _ = self._search_incoming(frame, tracks, region,
+                                                       self.config.switch_redetect)
 
     def _allowed_by_hint(self) -> np.ndarray | None:
         if self.hint is None:
@@ -248,6 +253,7 @@ class Localizer:
             event = 'global_vote'
         if found is None:
             self.state, self.region, self.camera_pose = LOST, -1, None
+            self._handover = -1
             self.tracker.reset()
             self.stats.falls_to_lost += 1
             return 'lost'
@@ -275,10 +281,13 @@ class Localizer:
         region = self.index.regions[self.region]
         tracks = self.tracker.track(image)
         predicted = self._predicted_camera(frame)
-        tracks = tracks.subset(np.isin(tracks.class_ids, region.features))
+        incoming = self.index.regions[self._handover].features if self._handover >= 0 \
+            else np.zeros(0, np.int64)
+        tracks = tracks.subset(np.isin(tracks.class_ids, region.features)
+                               | np.isin(tracks.class_ids, incoming))
         if predicted is not None:
             tracks = self._redetect(image, tracks, region, predicted)
-        if len(tracks) < config.min_tracked:
+        if np.isin(tracks.class_ids, region.features).sum() < config.min_tracked:
             return None, len(tracks), True
         solution = None
         if predicted is not None:
@@ -296,7 +305,10 @@ class Localizer:
             self.tracker.tracks = tracks
             return None, len(tracks), self._failures >= 2
         self._failures = 0
-        keep = np.isin(tracks.class_ids, solution.inlier_classes)
+        # Keep the inliers, and the incoming region's features no model view of this
+        # region judged (they are the next region's to judge).
+        keep = np.isin(tracks.class_ids, solution.inlier_classes) | \
+            ~np.isin(tracks.class_ids, region.view_classes)
         tracks = tracks.subset(keep)
         self.tracker.tracks = tracks
         self.camera_pose = solution.estimate.pose
@@ -306,11 +318,15 @@ class Localizer:
 
     def _redetect(self, image: np.ndarray, tracks: Tracks, region, predicted: np.ndarray
                   ) -> Tracks:
-        """Search lost features where the pose predicts them; re-anchor a few tracks."""
+        """Search lost features where the pose predicts them; re-anchor a few tracks.
+
+        During a handover the windows go to the incoming region's features instead
+        (:meth:`_maybe_switch`): the region being left needs no more.
+        """
         config = self.config
         missing = np.setdiff1d(region.features, tracks.class_ids)
         missing = missing[~self.tracker.cooling(missing)]
-        if missing.size:
+        if missing.size and self._handover < 0:
             uv, ok = self.index.project(predicted, missing)
             order = np.flatnonzero(ok)
             order = order[self.rng.permutation(order.size)][:config.redetect_per_frame]
@@ -333,47 +349,77 @@ class Localizer:
         return tracks
 
     def _maybe_switch(self, frame: Frame, region: int) -> None:
-        """Switch region before the features fade when the motion leads out (7.1)."""
+        """Switch region before the features fade when the motion leads out (7.1).
+
+        Make before break: once the predicted motion leads out of the region, the
+        chosen next region's features are searched where the current pose projects
+        them from the next frame on, ``ceil(switch_redetect / handover_frames)``
+        windows per frame in place of the re-detection's, while the current region
+        still gives the pose; the switch happens once ``switch_redetect`` were searched
+        (or none is left to search). The last of ``handover_frames`` frames, or one
+        where fewer than twice ``min_tracked`` of the current region's features remain,
+        searches all that is left and switches. A switch thus rarely costs one frame
+        all its windows (each a SIFT run).
+        """
         if self.camera_pose is None:
             return
+        config = self.config
         current = base_pose(self.index, self.camera_pose)
-        ahead = self.predictor.predict(current, self.config.predict_horizon_s)
-        tracked = {}
-        ids = self.tracker.tracks.class_ids
-        for r in np.append(self.index.region_graph[region].indices, region):
-            tracked[int(r)] = int(np.isin(self.index.regions[r].features, ids).sum())
+        ahead = self.predictor.predict(current, config.predict_horizon_s)
         target = choose_region(self.index, region, current[:2], ahead[:2],
-                               self.config.border_margin, tracked)
+                               config.border_margin,
+                               _TrackedCounts(self.index, self.tracker.tracks.class_ids))
         if target is None:
+            self._handover = -1
             return
         new = self.index.regions[target]
-        self.tracker.set_region(new)
+        if target != self._handover:
+            self._handover, self._handover_age, self._handover_searched = target, 0, 0
+            self.tracker.set_region(new)
+            return  # its windows start next frame, in place of the re-detection's
+        self._handover_age += 1
+        left = config.switch_redetect - self._handover_searched
+        current = int(np.isin(self.tracker.tracks.class_ids,
+                              self.index.regions[region].features).sum())
+        urgent = current < 2 * config.min_tracked or \
+            self._handover_age >= config.handover_frames
+        # The last frame (or a region about to lose its features) searches what is left.
+        count = left if urgent else min(left, -(-config.switch_redetect //
+                                                config.handover_frames))
+        self.tracker.tracks, tried = self._search_incoming(frame, self.tracker.tracks, new,
+                                                           count)
+        self._handover_searched += tried
+        if not urgent and tried == count and tried < left:
+            return  # more to search, time left, and the current region still holds
         tracks = self.tracker.tracks
-        keep = tracks.subset(np.isin(tracks.class_ids, new.features))
-        self.tracker.tracks = self._redetect_all(frame, keep, new)
-        self.region = target
+        self.tracker.tracks = tracks.subset(np.isin(tracks.class_ids, new.features))
+        self.region, self._handover = target, -1
         self.stats.predicted_switches += 1
         self._switched = True
 
-    def _redetect_all(self, frame: Frame, tracks: Tracks, region) -> Tracks:
+    def _search_incoming(self, frame: Frame, tracks: Tracks, region, count: int
+                         ) -> tuple[Tracks, int]:
+        """Search ``count`` of ``region``'s untracked features, landmark features first.
+
+        Returns the tracks with those found and how many were searched (fewer than
+        ``count`` when fewer are left that the current pose projects into the image).
+        """
         missing = np.setdiff1d(region.features, tracks.class_ids)
-        if missing.size == 0 or self.camera_pose is None:
-            return tracks
+        missing = missing[~self.tracker.cooling(missing)]
+        if missing.size == 0 or count <= 0 or self.camera_pose is None:
+            return tracks, 0
         uv, ok = self.index.project(self.camera_pose, missing)
-        # Landmark features first: they are the ones every pose of the region sees.
         order = np.flatnonzero(ok)
         order = order[np.argsort(~np.isin(missing[order], region.landmark), kind='stable')]
-        # Only as many windows as bring the tracks to twice min_tracked (each window is a
-        # SIFT run); the per-frame re-detection finds the rest over the next frames.
-        config = self.config
-        wanted = np.clip(2 * config.min_tracked - len(tracks), config.redetect_per_frame,
-                         config.switch_redetect)
-        order = order[:wanted]
+        order = order[:count]
         found = self.tracker.search(frame.image, missing[order], uv[order],
                                     self.config.redetect_radius_px)
-        return tracks.merged(found)
+        return tracks.merged(found), len(order)
 
     _switched = False
+    _handover = -1  # the region being prepared for a switch, -1 for none
+    _handover_age = 0
+    _handover_searched = 0
 
     # -- output ---------------------------------------------------------------------------
     def _estimate(self, frame: Frame, solution: PoseSolution | None, tracked: int, event: str,
@@ -399,6 +445,17 @@ class Localizer:
         return Estimate(frame.stamp_ns, self.state, self.region if self.state == TRACKING
                         else -1, pose, cov, camera, tracked, event,
                         time.perf_counter() - start)
+
+
+class _TrackedCounts:
+    """Per region, its features among ``class_ids``: counted only when asked (a tie)."""
+
+    def __init__(self, index: DatabaseIndex, class_ids: np.ndarray) -> None:
+        self.index, self.class_ids = index, class_ids
+
+    def get(self, region: int, default: int = 0) -> int:
+        features = self.index.regions[region].features
+        return int(np.isin(features, self.class_ids).sum()) if len(features) else default
 
 
 def _carry_covariance(cov: np.ndarray, camera: np.ndarray, mount: np.ndarray) -> np.ndarray:

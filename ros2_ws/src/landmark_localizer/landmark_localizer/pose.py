@@ -262,8 +262,8 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
             return None
         pose = pose + delta
         pose[2] = float(wrap_angle(pose[2]))
-        if np.abs(delta[:2]).max() < 1e-5 and abs(delta[2]) < 1e-6:
-            break
+        if np.abs(delta[:2]).max() < 1e-4 and abs(delta[2]) < 1e-5:
+            break  # a tenth of a millimetre: far below what the pixels resolve
     r, jac = _residuals_and_jacobian(pose, data, step)
     inlier = np.abs(r) <= 2.0 * threshold
     per_view = np.bincount(data.view[inlier], minlength=len(data.view_poses))

@@ -19,6 +19,7 @@ prediction, and each candidate scores the samples whose nearest pose it contains
 from __future__ import annotations
 
 from collections import deque
+from typing import Any
 
 import numpy as np
 
@@ -83,7 +84,7 @@ class MotionPredictor:
 
 
 def choose_region(index: DatabaseIndex, region: int, current_xy: np.ndarray,
-                  predicted_xy: np.ndarray, margin: float, tracked: dict[int, int]
+                  predicted_xy: np.ndarray, margin: float, tracked: Any
                   ) -> int | None:
     """Return the region to switch to before moving, or None to stay (module docstring).
 
@@ -93,7 +94,8 @@ def choose_region(index: DatabaseIndex, region: int, current_xy: np.ndarray,
         current_xy: The current position.
         predicted_xy: The predicted position.
         margin: "Near the border", in grid spacings.
-        tracked: Per region, how many of its features are tracked now (tie-breaker).
+        tracked: Per region, how many of its features are tracked now (tie-breaker;
+            anything with ``get(region, default)``).
     """
     near = index.tree.query_ball_point(np.asarray(predicted_xy, float)[:2],
                                        r=margin * index.spacing)
