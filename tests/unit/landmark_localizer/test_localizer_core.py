@@ -10,9 +10,11 @@ import pytest
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex, RegionData
+from landmark_localizer.localizer import TRACKING, Frame, Localizer
 from landmark_localizer.matching import grouped_nearest, mutual_matches, squared_distances
 from landmark_localizer.pose import refine_pose, solve_pose
 from landmark_localizer.switching import MotionPredictor, choose_region
+from landmark_localizer.tracking import Tracks
 
 
 @pytest.fixture(scope='module')
@@ -138,3 +140,53 @@ def test_config_refuses_bad_values() -> None:
         LocalizerConfig(lk_window=20)
     with pytest.raises(LocalizerError, match="unknown localizer setting 'nope'"):
         LocalizerConfig().with_values({'nope': 1})
+
+
+def test_switch_makes_before_it_breaks(world, monkeypatch) -> None:
+    """The next region's windows are spread over the frames before the switch."""
+    _, index = world
+    loc = Localizer(index, LocalizerConfig(switch_redetect=12, handover_frames=3))
+    loc.state, loc.region = TRACKING, 0
+    loc.camera_pose = np.array([3.0, 1.5, 0.0])
+    for i in range(5):  # heading east at 1 m/s: 0.6 s ahead leaves region 0 (x <= 3.5)
+        loc.predictor.add(i * 10**8, np.array([2.6 + 0.1 * i, 1.5, 0.0]), None)
+    region0 = index.regions[0]
+    loc.tracker.tracks = Tracks(region0.features.copy(),
+                                np.zeros((len(region0.features), 2), np.float32))
+    searched: list[int] = []
+
+    def search(frame, tracks, region, count):
+        searched.append(count)
+        return tracks, count
+
+    monkeypatch.setattr(loc, '_search_incoming', search)
+    frame = Frame(0, np.zeros((32, 32), np.uint8))
+    loc._maybe_switch(frame, 0)
+    assert (loc.region, loc._handover, searched) == (0, 1, [])  # decided, no window yet
+    loc._maybe_switch(frame, 0)
+    loc._maybe_switch(frame, 0)
+    assert (loc.region, searched) == (0, [4, 4])  # still region 0, four windows a frame
+    loc._maybe_switch(frame, 0)
+    assert (loc.region, loc._handover, searched) == (1, -1, [4, 4, 4])
+    assert loc.stats.predicted_switches == 1
+    # Kept: region 1's features only.
+    assert np.isin(loc.tracker.tracks.class_ids, index.regions[1].features).all()
+
+
+def test_a_region_running_low_switches_at_once(world, monkeypatch) -> None:
+    _, index = world
+    loc = Localizer(index, LocalizerConfig(switch_redetect=12, handover_frames=3))
+    loc.state, loc.region = TRACKING, 0
+    loc.camera_pose = np.array([3.0, 1.5, 0.0])
+    for i in range(5):
+        loc.predictor.add(i * 10**8, np.array([2.6 + 0.1 * i, 1.5, 0.0]), None)
+    few = index.regions[0].features[:10]  # fewer than twice min_tracked
+    loc.tracker.tracks = Tracks(few.copy(), np.zeros((10, 2), np.float32))
+    searched: list[int] = []
+    monkeypatch.setattr(loc, '_search_incoming',
+                        lambda frame, tracks, region, count: (searched.append(count), (tracks,
+                                                              count))[1])
+    frame = Frame(0, np.zeros((32, 32), np.uint8))
+    loc._maybe_switch(frame, 0)
+    loc._maybe_switch(frame, 0)
+    assert (loc.region, searched) == (1, [12])  # every window at once, then the switch
