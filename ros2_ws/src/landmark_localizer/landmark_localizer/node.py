@@ -56,10 +56,9 @@ from typing import Any
 
 import numpy as np
 
-from landmark_db.errors import VbnError
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
-from visibility_builder.ros_environment import check_ros_environment
+from visibility_builder.ros_tools.node_main import run_node
 
 __all__ = ['IMAGE_TOPICS', 'Mailbox', 'NodeSettings', 'config_descriptions', 'main']
 
@@ -276,30 +275,8 @@ def limit_malloc_arenas(arenas: int = _ARENAS) -> bool:
 
 def main(args: list[str] | None = None) -> int:
     """Run the localizer node until Ctrl-C; 2 on a start-up error (one line on stderr)."""
-    try:
-        check_ros_environment()
-    except VbnError as error:
-        print(f'localizer: error: {error}', file=sys.stderr)
-        return 2
     limit_malloc_arenas()
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = _make_node()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except VbnError as error:
-        print(f'localizer: error: {error}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node('localizer', _make_node, args)
 
 
 def _make_node() -> Any:

@@ -31,7 +31,7 @@ import time
 from typing import Any
 
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.ros_environment import check_ros_environment
+from visibility_builder.ros_tools.node_main import run_node
 
 __all__ = ['LIVE_TOPICS', 'main']
 
@@ -42,34 +42,13 @@ _IMAGE_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed')
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the builder node until Ctrl-C (or the end of a build with shutdown_after_build)."""
-    try:
-        check_ros_environment()
-    except VisibilityBuilderError as error:
-        print(f'builder: error: {error}', file=sys.stderr)
-        return 2
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    """Run the builder node until Ctrl-C (or the end of a build with shutdown_after_build).
 
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = _make_node()
-        executor = MultiThreadedExecutor(num_threads=3)
-        executor.add_node(node)
-        node.start()
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except VisibilityBuilderError as error:
-        print(f'builder: error: {error}', file=sys.stderr)
-        return 2
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return node.exit_code if node is not None else 1
+    Three executor threads: ``~/build`` waits for the build while the recorder's
+    subscriptions and the progress timer go on.
+    """
+    return run_node('builder', _make_node, args, threads=3, start=lambda node: node.start(),
+                    close=lambda node: node.close())
 
 
 def _make_node() -> Any:
