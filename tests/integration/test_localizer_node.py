@@ -544,11 +544,6 @@ def memory_over(frames: int, room_db, start_process, ros_node, rate_hz: float = 
     assert growth < 1.10, samples
 
 
-def test_memory_flat_over_2000_frames(room_db, start_process, ros_node) -> None:
-    memory_over(2000, room_db, start_process, ros_node)
-
-
-@pytest.mark.bench
 def test_memory_flat_over_10000_frames(room_db, start_process, ros_node) -> None:
     memory_over(10_000, room_db, start_process, ros_node)
 

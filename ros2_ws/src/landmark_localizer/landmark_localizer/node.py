@@ -260,11 +260,12 @@ class Mailbox:
 def limit_malloc_arenas(arenas: int = _ARENAS) -> bool:
     """Share at most ``arenas`` glibc malloc arenas between all threads; say if it took.
 
-    glibc gives threads their own arenas (up to 8 per core). Frames processed on the
-    executor's threads in turn leave freed memory scattered over several arenas, and the
-    node's resident memory grew by a quarter over 10,000 frames (239 to 301 MiB); with two
-    arenas it stays flat (1.02x, tests/integration/test_localizer_node.py). Elsewhere than
-    glibc this does nothing.
+    glibc gives threads their own arenas (up to 8 per core). When frames were processed
+    on two executor threads in turn, freed memory was left scattered over several arenas
+    and the node's resident memory grew by a quarter over 10,000 frames (239 to 301 MiB);
+    with two arenas it stayed flat (1.02x). The frame worker and the executor thread still
+    allocate both, so the cap stays (tests/integration/test_localizer_node.py checks
+    10,000 frames). Elsewhere than glibc this does nothing.
     """
     try:
         libc = ctypes.CDLL(None)

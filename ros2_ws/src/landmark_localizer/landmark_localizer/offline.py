@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 import logging
+import math
 import time
 
 import numpy as np
@@ -20,11 +21,13 @@ from landmark_localizer.evaluation import (
     evaluate_run,
     latency_summary,
 )
+from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
 from landmark_localizer.pose_bags import PoseRecord, RunBag
 from visibility_builder.geometry.frames import wrap_angle
 
-__all__ = ['OfflineRun', 'evaluate_offline', 'interpolate_poses', 'localize_run']
+__all__ = ['OfflineRun', 'coverage_split', 'evaluate_offline', 'interpolate_poses',
+           'localize_run']
 
 _LOG = logging.getLogger(__name__)
 
@@ -159,3 +162,38 @@ def evaluate_offline(result: OfflineRun, run: RunBag, falls_to_lost: int | None 
         return evaluation
     return replace(evaluation, cpu_latency=latency_summary(result.cpu_seconds[order],
                                                            voted[order]))
+
+
+def coverage_split(result: OfflineRun, run: RunBag, index: DatabaseIndex
+                   ) -> dict[str, dict[str, float]]:
+    """Availability and accuracy inside and outside the database's regions.
+
+    A frame is inside when its true position is within one grid spacing of a sampled
+    pose that some region contains: the decomposition may leave k-coverable poses in no
+    region (the sigma rule, Section 5.5), and a run through them measures the database
+    as much as the localizer.
+
+    Returns:
+        ``{'inside': {...}, 'outside': {...}}``, each with ``frames``, ``poses``,
+        ``availability``, ``translation_median_m`` and ``translation_p95_m`` (NaN
+        without poses); empty when the run has no ground truth.
+    """
+    if not len(run.truth_stamps_ns):
+        return {}
+    stamps = np.array([e.stamp_ns for e in result.estimates], np.int64)
+    truth = interpolate_poses(run.truth_stamps_ns, run.truth_poses, stamps)
+    known = np.all(np.isfinite(truth), axis=1)
+    covered_pose = np.asarray(index.region_poses.sum(axis=0)).ravel() > 0
+    distance, nearest = index.tree.query(np.where(known[:, None], truth[:, :2], 0.0))
+    inside = known & covered_pose[nearest] & (distance <= index.spacing)
+    error = np.array([np.hypot(*(e.pose[:2] - t[:2])) if e.pose is not None else np.nan
+                      for e, t in zip(result.estimates, truth, strict=True)])
+    split = {}
+    for name, mask in (('inside', inside), ('outside', known & ~inside)):
+        found = error[mask & np.isfinite(error)]
+        split[name] = {
+            'frames': int(mask.sum()), 'poses': int(found.size),
+            'availability': float(found.size / mask.sum()) if mask.any() else math.nan,
+            'translation_median_m': float(np.median(found)) if found.size else math.nan,
+            'translation_p95_m': float(np.percentile(found, 95)) if found.size else math.nan}
+    return split

@@ -13,8 +13,10 @@ starts from a fresh process with ``OPENBLAS_NUM_THREADS=1``:
   region changes by prediction, latency in TRACKING and LOST;
 - ``bags/room_run_kidnapped``: frames from the teleport to a correct pose;
 - ``cache/room_run_effects`` (rendered here if missing, with exposure, blur and noise);
-- ``cache/floor_run`` on the floor database (``cache/floor_exploration``): accuracy,
-  availability, and TRACKING latency against the room's (it must not grow);
+- ``cache/floor_run`` on the floor database (``cache/floor_exploration``): its latency
+  targets, TRACKING latency against the room's (it must not grow), and accuracy and
+  availability reported (the issue's accuracy targets are the room runs'), also split
+  by whether the true position lies in one of the database's regions;
 - the baseline (:mod:`landmark_localizer.baseline`) on ``room_run`` and on the first
   ``--baseline-frames`` frames of ``floor_run``: its figures as ratios to ours, and its
   database's size (all descriptors and keypoints) against ours (the SQLite file).
@@ -259,7 +261,7 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
                t.lost_p95_s)
         target('room_run_kidnapped CPU time LOST p95, s',
                _get(kidnapped, 'cpu_latency', 'lost_p95'), t.lost_p95_s)
-    for name in ('room_run_effects', 'floor_run'):
+    for name in ('room_run_effects',):
         fig = runs.get(name)
         if fig:
             acc = _accuracy(fig) or {}
@@ -292,10 +294,33 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
         lines.append(f'| TRACKING p95 latency floor / room (must not grow) | {ratio:.2f} | '
                      f'- | {room["size_bytes"] / 1e6:.2f} MB vs {floor["size_bytes"] / 1e6:.2f}'
                      ' MB databases |')
+    if floor:
+        lines += _floor_report(floor)
     lines += _ratios(runs)
     lines.append('')
     lines.append('RESULT: ' + ('PASS (every target met)' if passed else 'FAIL (see FAIL rows)'))
     return '\n'.join(lines), passed
+
+
+def _floor_report(floor: dict[str, Any]) -> list[str]:
+    """floor_run's accuracy and availability (reported: the issue's targets are the room's).
+
+    Split by whether the true position lies in one of the database's regions: the
+    builder's decomposition (sigma rule) leaves some k-coverable poses in none.
+    """
+    acc = _accuracy(floor) or {}
+    lines = ['', '| floor_run (reported) | frames | availability | translation median | '
+             'translation p95 | region changes by prediction |', '|---|---|---|---|---|---|',
+             f"| all | {floor['frames']} | {100 * floor['availability']:.1f} % | "
+             f"{100 * acc.get('translation_median_m', math.nan):.2f} cm | "
+             f"{100 * acc.get('translation_p95_m', math.nan):.2f} cm | "
+             f"{100 * _get(floor, 'changes', 'predicted_fraction'):.0f} % |"]
+    for name, part in (floor.get('coverage') or {}).items():
+        lines.append(f"| {name} the database's regions | {part['frames']} | "
+                     f"{100 * (part['availability'] or math.nan):.1f} % | "
+                     f"{100 * (part['translation_median_m'] or math.nan):.2f} cm | "
+                     f"{100 * (part['translation_p95_m'] or math.nan):.2f} cm | - |")
+    return lines
 
 
 def _ratios(runs: dict[str, dict[str, Any]]) -> list[str]:

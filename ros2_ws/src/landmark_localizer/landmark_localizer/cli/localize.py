@@ -124,7 +124,7 @@ def run(args: argparse.Namespace) -> int:
     from landmark_localizer.errors import LocalizerError
     from landmark_localizer.evaluation import evo_ape, format_evaluation
     from landmark_localizer.localizer import Localizer
-    from landmark_localizer.offline import evaluate_offline, localize_run
+    from landmark_localizer.offline import coverage_split, evaluate_offline, localize_run
     from landmark_localizer.pose_bags import read_run_bag, write_pose_bag
 
     out = Path(args.out)
@@ -165,12 +165,20 @@ def run(args: argparse.Namespace) -> int:
     events = dict(sorted(stats.events.items())) if stats else {}
     if stats:
         print(f'  events            {events}')
+    split = {} if args.baseline else coverage_split(result, run_bag, localizer.index)
+    for name, part in split.items():
+        if part['frames']:
+            print(f'  {name + " regions":17s} {part["frames"]} frames, availability '
+                  f'{100 * part["availability"]:.1f} %, translation median '
+                  f'{100 * part["translation_median_m"]:.2f} cm, p95 '
+                  f'{100 * part["translation_p95_m"]:.2f} cm')
     if args.json:
         figures = evaluation.as_dict()
         figures.update(bag=str(args.bag), db=str(args.db), baseline=args.baseline,
                        size_bytes=size_bytes, out=str(out), one_core=pinned,
                        wall_seconds=result.wall_seconds, events=events,
                        votes=stats.votes if stats else None, settings=config.as_dict(),
+                       coverage=split,
                        frames_detail=_frames_detail(result.estimates))
         Path(args.json).write_text(json.dumps(figures, indent=1, default=_json_default))
     return 0

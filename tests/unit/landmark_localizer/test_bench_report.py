@@ -1,0 +1,36 @@
+"""vbn bench-localize's table: the room runs carry the targets, floor_run is reported."""
+from __future__ import annotations
+
+from landmark_localizer.cli.bench_localize import report
+
+
+def figures(availability: float, median: float, p95: float, tracking_p95: float,
+            lost_p95: float, size: int = 10**6, **extra) -> dict:
+    return {'frames': 100, 'poses': int(100 * availability), 'availability': availability,
+            'changes': {'predicted': 9, 'after_loss': 1, 'predicted_fraction': 0.9},
+            'evo': {'translation_median_m': median, 'translation_p95_m': p95,
+                    'heading_median_deg': 0.1},
+            'latency': {'p50': 0.005, 'p95': tracking_p95, 'tracking_p95': tracking_p95,
+                        'lost_p95': lost_p95},
+            'cpu_latency': {'tracking_p95': tracking_p95, 'lost_p95': lost_p95},
+            'size_bytes': size, 'recovery': [1], 'db': 'x.db', **extra}
+
+
+def test_room_targets_pass_and_floor_accuracy_is_reported_not_judged() -> None:
+    coverage = {'inside': {'frames': 60, 'poses': 59, 'availability': 59 / 60,
+                           'translation_median_m': 0.006, 'translation_p95_m': 0.034},
+                'outside': {'frames': 40, 'poses': 30, 'availability': 0.75,
+                            'translation_median_m': 0.016, 'translation_p95_m': 0.33}}
+    runs = {'room_run': figures(1.0, 0.008, 0.046, 0.0086, 0.072),
+            'room_run_kidnapped': figures(0.99, 0.006, 0.023, 0.009, 0.105),
+            # Far from the room's accuracy targets, but they are not the floor's.
+            'floor_run': figures(0.90, 0.008, 0.178, 0.0085, 0.064, 8 * 10**6,
+                                 coverage=coverage)}
+    text, passed = report(runs)
+    assert passed, text
+    assert 'floor_run translation p95' not in text  # no target row for the floor's accuracy
+    assert "| inside the database's regions | 60 | 98.3 % | 0.60 cm | 3.40 cm | - |" in text
+    assert "| outside the database's regions | 40 | 75.0 % | 1.60 cm | 33.00 cm | - |" in text
+    runs['floor_run']['latency']['tracking_p95'] = 0.012  # the floor's latency is judged
+    text, passed = report(runs)
+    assert not passed and '| floor_run latency TRACKING p95, s | 0.012 | <= 0.01 | FAIL |' in text
