@@ -43,7 +43,9 @@ def read_run(name: str) -> dict:
         for topic, msgtype, stamp, raw in reader.messages():
             if topic == '/ground_truth/pose':
                 msg = reader.deserialize(raw, msgtype)
-                truth[stamp] = (msg.pose.position.x, msg.pose.position.y)
+                q = msg.pose.orientation
+                truth[stamp] = (msg.pose.position.x, msg.pose.position.y,
+                                float(quaternion_yaw(np.array([q.x, q.y, q.z, q.w]))))
             elif topic == '/odom':
                 msg = reader.deserialize(raw, msgtype)
                 q = msg.pose.pose.orientation
@@ -150,6 +152,10 @@ def planar(transform) -> np.ndarray:
     return np.array([t.x, t.y, float(quaternion_yaw(np.array([q.x, q.y, q.z, q.w])))])
 
 
+def wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
 def compose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     c, s = math.cos(a[2]), math.sin(a[2])
     return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], a[2] + b[2]])
@@ -171,18 +177,23 @@ def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
     spin_for(ros_node, 1.5)
     assert node.popen.poll() is None, node.output
 
-    # Poses in map with the images' stamps, close to the ground truth, never NaN. (The node
-    # keeps up at twice the bag's speed on an idle machine; on a loaded one it drops frames,
-    # by design (depth-1 queue): 194 of 439 measured beside a second test suite, so the
-    # count is bounded loosely. The offline test checks availability frame by frame.)
+    # The issue's targets for room_run, from what arrives on /localizer/pose: a pose for
+    # at least 98 % of the frames, in map with the image's stamp, translation median at
+    # most 1 cm and 95th percentile at most 5 cm, heading median at most 0.2 degree.
     image_stamps = {s for s, _ in run['images']}
-    assert len(listener.poses) >= 0.3 * len(image_stamps), (len(listener.poses), node.output)
+    assert len(listener.poses) >= 0.98 * len(image_stamps), (len(listener.poses),
+                                                             node.output)
     assert {p.header.frame_id for p in listener.poses} == {'map'}
     stamps, errors = pose_errors(listener, run['truth'])
     assert set(stamps) <= image_stamps
     assert np.all(np.diff(stamps) > 0)
-    assert np.median(errors) < 0.1 and np.percentile(errors, 95) < 0.3, np.percentile(
+    assert np.median(errors) <= 0.01 and np.percentile(errors, 95) <= 0.05, np.percentile(
         errors, [50, 95, 100])
+    headings = np.array([abs(wrap(quaternion_yaw(np.array([o.x, o.y, o.z, o.w]))
+                                  - run['truth'][s][2]))
+                         for p, s in zip(listener.poses, stamps, strict=True)
+                         for o in [p.pose.orientation]])
+    assert np.degrees(np.median(headings)) <= 0.2, np.degrees(np.median(headings))
     cov = np.array([m.pose.covariance for m in listener.poses_cov])
     assert np.all(np.isfinite(cov)) and np.all(cov[:, [0, 7, 35]] > 0)
     # A region most of the time (-1 only while LOST).
@@ -222,13 +233,18 @@ def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
     assert int(status['frames_processed']) >= len(listener.poses) >= \
         0.9 * int(status['frames_processed'])  # a pose for nearly every frame processed
     assert float(status['latency_p50_ms']) > 0 and float(status['latency_p95_ms']) < 1000
-    assert int(status['predicted_switches']) > 0 and status['odometry'] == 'yes'
+    assert status['odometry'] == 'yes'
+    predicted, after_loss = int(status['predicted_switches']), int(status['switches_after_loss'])
+    assert predicted > 0 and predicted >= 0.9 * (predicted + after_loss), status
     assert status['camera_info'] == 'matches'
     for key in ('tracked', 'falls_to_lost', 'switches_after_loss', 'frames_dropped'):
         assert key in status
     print(f'room_run at rate 1 in {elapsed:.1f} s: {len(listener.poses)} poses of '
           f'{len(image_stamps)} images, p50 {status["latency_p50_ms"]} ms, p95 '
-          f'{status["latency_p95_ms"]} ms, error median {np.median(errors):.3f} m')
+          f'{status["latency_p95_ms"]} ms, error median {np.median(errors):.4f} m, p95 '
+          f'{np.percentile(errors, 95):.4f} m, heading median '
+          f'{np.degrees(np.median(headings)):.3f} deg, {predicted} predicted and '
+          f'{after_loss} after-loss region changes')
 
     # AMCL's service: forget the region; the diagnostics then say LOST.
     from std_srvs.srv import Empty
@@ -450,7 +466,7 @@ def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) 
     assert 10 < burst < 1000  # processed some, dropped the rest
     # /initialpose (as RViz sends it): voting restricted to the regions near it.
     from geometry_msgs.msg import PoseWithCovarianceStamped
-    x, y = run['truth'][run['images'][60][0]]
+    x, y = run['truth'][run['images'][60][0]][:2]
     hint = PoseWithCovarianceStamped()
     hint.header.frame_id = 'map'
     hint.pose.pose.position.x, hint.pose.pose.position.y = x, y
@@ -462,7 +478,7 @@ def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) 
     assert ros_node.spin_until(lambda: len(listener.poses) > poses, timeout=10)
     assert len(listener.regions) > after
     last = listener.poses[-1]
-    x, y = run['truth'][run['images'][sent[stamp_ns(last.header.stamp)]][0]]
+    x, y = run['truth'][run['images'][sent[stamp_ns(last.header.stamp)]][0]][:2]
     assert math.hypot(last.pose.position.x - x, last.pose.position.y - y) < 0.3
     assert all(np.all(np.isfinite([p.pose.position.x, p.pose.position.y]))
                for p in listener.poses)
