@@ -155,11 +155,11 @@ def test_switch_makes_before_it_breaks(world, monkeypatch) -> None:
                                 np.zeros((len(region0.features), 2), np.float32))
     searched: list[int] = []
 
-    def search(frame, tracks, region, count):
+    def search(image, tracks, region, pose, count, landmark_first=False):
         searched.append(count)
         return tracks, count
 
-    monkeypatch.setattr(loc, '_search_incoming', search)
+    monkeypatch.setattr(loc, '_search_missing', search)
     frame = Frame(0, np.zeros((32, 32), np.uint8))
     loc._maybe_switch(frame, 0)
     assert (loc.region, loc._handover, searched) == (0, 1, [])  # decided, no window yet
@@ -183,9 +183,9 @@ def test_a_region_running_low_switches_at_once(world, monkeypatch) -> None:
     few = index.regions[0].features[:10]  # fewer than twice min_tracked
     loc.tracker.tracks = Tracks(few.copy(), np.zeros((10, 2), np.float32))
     searched: list[int] = []
-    monkeypatch.setattr(loc, '_search_incoming',
-                        lambda frame, tracks, region, count: (searched.append(count), (tracks,
-                                                              count))[1])
+    monkeypatch.setattr(loc, '_search_missing',
+                        lambda image, tracks, region, pose, count, landmark_first=False:
+                        (searched.append(count), (tracks, count))[1])
     frame = Frame(0, np.zeros((32, 32), np.uint8))
     loc._maybe_switch(frame, 0)
     loc._maybe_switch(frame, 0)

@@ -222,8 +222,9 @@ class Localizer:
         self.predictor.reset()
         # The vote matched some of the region's features; look for the others where
         # the pose puts them (a LOST frame has the time), as a switch does.
-        self.tracker.tracks, _ = self._search_incoming(frame, tracks, region,
-                                                       self.config.switch_redetect)
+        self.tracker.tracks, _ = self._search_missing(
+            np.asarray(frame.image), tracks, region, self.camera_pose,
+            self.config.switch_redetect, landmark_first=True)
 
     def _allowed_by_hint(self) -> np.ndarray | None:
         if self.hint is None:
@@ -323,16 +324,9 @@ class Localizer:
         During a handover the windows go to the incoming region's features instead
         (:meth:`_maybe_switch`): the region being left needs no more.
         """
-        config = self.config
-        missing = np.setdiff1d(region.features, tracks.class_ids)
-        missing = missing[~self.tracker.cooling(missing)]
-        if missing.size and self._handover < 0:
-            uv, ok = self.index.project(predicted, missing)
-            order = np.flatnonzero(ok)
-            order = order[self.rng.permutation(order.size)][:config.redetect_per_frame]
-            found = self.tracker.search(image, missing[order], uv[order],
-                                        config.redetect_radius_px)
-            tracks = tracks.merged(found)
+        if self._handover < 0:
+            tracks, _ = self._search_missing(image, tracks, region, predicted,
+                                             self.config.redetect_per_frame)
         return self._reanchor(image, tracks, self.tracker.refresh_candidates(tracks), 2.0)
 
     def _reanchor(self, image: np.ndarray, tracks: Tracks, which: np.ndarray, radius: float
@@ -386,8 +380,9 @@ class Localizer:
         # The last frame (or a region about to lose its features) searches what is left.
         count = left if urgent else min(left, -(-config.switch_redetect //
                                                 config.handover_frames))
-        self.tracker.tracks, tried = self._search_incoming(frame, self.tracker.tracks, new,
-                                                           count)
+        self.tracker.tracks, tried = self._search_missing(
+            frame.image, self.tracker.tracks, new, self.camera_pose, count,
+            landmark_first=True)
         self._handover_searched += tried
         if not urgent and tried == count and tried < left:
             return  # more to search, time left, and the current region still holds
@@ -397,22 +392,30 @@ class Localizer:
         self.stats.predicted_switches += 1
         self._switched = True
 
-    def _search_incoming(self, frame: Frame, tracks: Tracks, region, count: int
-                         ) -> tuple[Tracks, int]:
-        """Search ``count`` of ``region``'s untracked features, landmark features first.
+    def _search_missing(self, image: np.ndarray, tracks: Tracks, region, pose: np.ndarray,
+                        count: int, landmark_first: bool = False) -> tuple[Tracks, int]:
+        """Search ``count`` of ``region``'s untracked features where ``pose`` puts them.
+
+        Features searched in vain lately are skipped (the tracker's cool-down); the rest
+        are taken landmark features first (a switch, a vote) or in random order (the
+        re-detection of lost tracks, so that none is starved).
 
         Returns the tracks with those found and how many were searched (fewer than
-        ``count`` when fewer are left that the current pose projects into the image).
+        ``count`` when fewer are left that the pose projects into the image).
         """
         missing = np.setdiff1d(region.features, tracks.class_ids)
         missing = missing[~self.tracker.cooling(missing)]
-        if missing.size == 0 or count <= 0 or self.camera_pose is None:
+        if missing.size == 0 or count <= 0:
             return tracks, 0
-        uv, ok = self.index.project(self.camera_pose, missing)
+        uv, ok = self.index.project(pose, missing)
         order = np.flatnonzero(ok)
-        order = order[np.argsort(~np.isin(missing[order], region.landmark), kind='stable')]
+        if landmark_first:
+            order = order[np.argsort(~np.isin(missing[order], region.landmark),
+                                     kind='stable')]
+        else:
+            order = order[self.rng.permutation(order.size)]
         order = order[:count]
-        found = self.tracker.search(frame.image, missing[order], uv[order],
+        found = self.tracker.search(image, missing[order], uv[order],
                                     self.config.redetect_radius_px)
         return tracks.merged(found), len(order)
 
