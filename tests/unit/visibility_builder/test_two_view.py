@@ -367,6 +367,11 @@ def test_pointwise_residuals_equal_each_motions_own(seed: int) -> None:
     each = [planar_epipolar_residuals(f1[i:i + 1], f2[i:i + 1], theta[i], phi[i])[0]
             for i in range(12)]
     assert np.allclose(pointwise_planar_residuals(f1, f2, theta, phi), each, atol=1e-12)
+    # (m, n) motions: one row per set, as the localizer scores a pose and its probes.
+    rows = pointwise_planar_residuals(f1, f2, np.stack([theta, theta[::-1]]),
+                                      np.stack([phi, phi[::-1]]))
+    assert rows.shape == (2, 12) and np.allclose(rows[0], each, atol=1e-12)
+    assert np.allclose(rows[1], pointwise_planar_residuals(f1, f2, theta[::-1], phi[::-1]))
     # Every motion scored on every correspondence (the robust solvers' form).
     grid = _planar_sampson(f1 @ BASE_TO_CAMERA_ROTATION.T, f2 @ BASE_TO_CAMERA_ROTATION.T,
                            theta[:3, None], phi[:3, None])

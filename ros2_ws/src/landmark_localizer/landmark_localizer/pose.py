@@ -210,11 +210,8 @@ def _residuals(poses: np.ndarray, data: _Correspondences) -> np.ndarray:
     c, s = np.cos(vp[:, 2]), np.sin(vp[:, 2])
     theta = wrap_angle(poses[:, None, 2] - vp[None, :, 2])
     phi = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
-    m = len(poses)
-    r = pointwise_planar_residuals(np.tile(data.rays_model, (m, 1)),
-                                   np.tile(data.rays_current, (m, 1)),
-                                   theta[:, data.view].ravel(), phi[:, data.view].ravel())
-    return r.reshape(m, -1)
+    return pointwise_planar_residuals(data.rays_model, data.rays_current,
+                                      theta[:, data.view], phi[:, data.view])
 
 
 def _residuals_and_jacobian(pose: np.ndarray, data: _Correspondences, step: np.ndarray

@@ -276,16 +276,18 @@ def pointwise_planar_residuals(rays_model: np.ndarray, rays_current: np.ndarray,
     Like :func:`planar_epipolar_residuals`, but ``theta`` and ``phi`` are ``(n,)``:
     each correspondence may belong to another model view (one motion per view,
     repeated for its correspondences), so that the errors of several views come from
-    one vectorised pass (the localizer refines a pose on all its views at once).
+    one vectorised pass (the localizer refines a pose on all its views at once). They
+    may also be ``(m, n)``: ``m`` such sets of motions at once, ``(m, n)`` errors.
 
     Args:
         rays_model: ``(n, 3)`` unit rays of each correspondence's model view.
         rays_current: ``(n, 3)`` unit rays of the current view.
-        theta: ``(n,)`` relative yaw of each correspondence's motion, radians.
-        phi: ``(n,)`` bearing of each correspondence's motion, radians.
+        theta: ``(n,)`` (or ``(m, n)``) relative yaw of each correspondence's motion,
+            radians.
+        phi: ``(n,)`` (or ``(m, n)``) bearing of each correspondence's motion, radians.
 
     Returns:
-        ``(n,)`` signed errors, radians.
+        ``(n,)`` (or ``(m, n)``) signed errors, radians.
     """
     return _planar_sampson(np.asarray(rays_model, dtype=float) @ _M.T,
                            np.asarray(rays_current, dtype=float) @ _M.T,
