@@ -6,6 +6,9 @@ explicit ``rng``.
 """
 from __future__ import annotations
 
+from pathlib import Path
+import sqlite3
+
 import numpy as np
 
 from landmark_db.database import (
@@ -92,3 +95,14 @@ def large_database(rng: np.random.Generator, view_features: int = 4000) -> Landm
                                     tuple(views * 20)))
     return LandmarkDatabase(small.info, small.poses, small.classes, tuple(regions),
                             small.uncovered)
+
+
+def edited_copy(source: Path, target: Path, *statements: str) -> Path:
+    """Copy a database file and run SQL statements on the copy (damage on purpose)."""
+    target.write_bytes(source.read_bytes())
+    connection = sqlite3.connect(target)
+    for statement in statements:
+        connection.execute(statement)
+    connection.commit()
+    connection.close()
+    return target

@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-import sqlite3
 import subprocess
 import sys
 import time
 
+from database_samples import edited_copy
 import numpy as np
 import pytest
 
@@ -565,16 +565,6 @@ def memory_over(frames: int, room_db, start_process, ros_node, rate_hz: float = 
 
 def test_memory_flat_over_10000_frames(room_db, start_process, ros_node) -> None:
     memory_over(10_000, room_db, start_process, ros_node)
-
-
-def edited_copy(source: Path, target: Path, *statements: str) -> Path:
-    target.write_bytes(source.read_bytes())
-    connection = sqlite3.connect(target)
-    for statement in statements:
-        connection.execute(statement)
-    connection.commit()
-    connection.close()
-    return target
 
 
 @pytest.mark.parametrize('case', ['missing', 'random_bytes', 'newer_schema'])

@@ -10,7 +10,7 @@ import sys
 import textwrap
 import time
 
-from database_samples import sample_database
+from database_samples import edited_copy, sample_database
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -34,16 +34,6 @@ def db_file(tmp_path):
     path = tmp_path / 'room.db'
     write_database(path, sample_database(np.random.default_rng(0)))
     return path
-
-
-def edited_copy(source: Path, target: Path, *statements: str) -> Path:
-    target.write_bytes(source.read_bytes())
-    connection = sqlite3.connect(target)
-    for statement in statements:
-        connection.execute(statement)
-    connection.commit()
-    connection.close()
-    return target
 
 
 def refused(path) -> str:
