@@ -44,6 +44,9 @@ def test_index_triangulates_the_classes_and_projects_them_back(world) -> None:
     np.testing.assert_allclose(predicted, uv, atol=1e-4)
     assert index.spacing == pytest.approx(0.5)
     assert index.regions_of_pose(index.nearest_pose([3.0, 1.5])[0]).tolist() == [0, 1]
+    for c in (0, 7, index.n_classes - 1):  # the same rows as a scan, in the same order
+        np.testing.assert_array_equal(index.class_descriptors(c),
+                                      index.descriptors[index.descriptor_class == c])
 
 
 def test_refine_recovers_the_pose_from_a_rough_prediction(world) -> None:

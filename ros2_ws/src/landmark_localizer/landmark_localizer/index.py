@@ -125,6 +125,11 @@ class DatabaseIndex:
         self.descriptor_norms = np.einsum('ij,ij->i', self.descriptors, self.descriptors)
         self.descriptor_class = np.asarray(classes.descriptor_classes, np.int64)
         self.n_classes = classes.n_classes
+        # Each class's descriptor rows, for re-detection: rows _by_class[_starts[c]:
+        # _starts[c + 1]] (a scan of every descriptor per class would grow with the database).
+        self._by_class = np.argsort(self.descriptor_class, kind='stable')
+        self._starts = np.searchsorted(self.descriptor_class[self._by_class],
+                                       np.arange(self.n_classes + 1))
         self._flann = cv2.flann_Index(self.descriptors, {'algorithm': _FLANN_KDTREE,
                                                          'trees': FLANN_TREES})
         self.membership: sp.csr_matrix = database.membership.tocsr()  # (classes, regions)
@@ -140,6 +145,11 @@ class DatabaseIndex:
         graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
         self.region_graph = (graph + graph.T).tocsr()
         self.points = self._triangulate()
+
+    def class_descriptors(self, class_id: int) -> np.ndarray:
+        """(d, 128) float32: the representative descriptors of one class."""
+        rows = self._by_class[self._starts[class_id]:self._starts[class_id + 1]]
+        return self.descriptors[rows]
 
     # -- voting --------------------------------------------------------------------------
     def nearest_classes(self, query: np.ndarray, checks: int = 64

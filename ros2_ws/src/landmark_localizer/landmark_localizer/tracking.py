@@ -92,7 +92,7 @@ class Tracker:
             c = int(c)
             if c in self._reference:
                 continue
-            rows = [index.descriptors[index.descriptor_class == c]]
+            rows = [index.class_descriptors(c)]
             for view in region.views:
                 if c in view.position:
                     rows.append(view.descriptors[view.position[c]][None, :])
