@@ -74,7 +74,8 @@ class Tracker:
         self.tracks = Tracks()
         self._refresh_cursor = 0
         self._frame = 0
-        self._searched: dict[int, int] = {}  # class -> frame of its last failed search
+        # Per class, the frame of its last search in vain (long ago: never).
+        self._searched = np.full(index.n_classes, -10**9, np.int64)
         self._reference: dict[int, np.ndarray] = {}
         window = config.lk_window
         self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,
@@ -122,7 +123,7 @@ class Tracker:
     def cooling(self, class_ids: np.ndarray) -> np.ndarray:
         """(n,) bool: classes searched in vain within the last ``redetect_cooldown`` frames."""
         limit = self._frame - self.config.redetect_cooldown
-        return np.array([self._searched.get(int(c), -10**9) > limit for c in class_ids], bool)
+        return self._searched[np.asarray(class_ids, np.int64)] > limit
 
     def search(self, gray: np.ndarray, class_ids: np.ndarray, predicted: np.ndarray,
                radius: float, remember: bool = True) -> Tracks:
@@ -157,10 +158,8 @@ class Tracker:
                 found_ids.append(int(c))
                 found_uv.append(pts[near][best])
         if remember:
-            found = set(found_ids)
-            for c in class_ids:
-                if int(c) not in found:
-                    self._searched[int(c)] = self._frame
+            class_ids = np.asarray(class_ids, np.int64)
+            self._searched[class_ids[~np.isin(class_ids, found_ids)]] = self._frame
         if not found_ids:
             return Tracks()
         return Tracks(np.array(found_ids, np.int64), np.array(found_uv, np.float32))
