@@ -193,3 +193,26 @@ def test_a_region_running_low_switches_at_once(world, monkeypatch) -> None:
     loc._maybe_switch(frame, 0)
     loc._maybe_switch(frame, 0)
     assert (loc.region, searched) == (1, [12])  # every window at once, then the switch
+
+
+def test_coverage_split_by_the_database_regions(world) -> None:
+    from pathlib import Path
+
+    from landmark_localizer.localizer import Estimate
+    from landmark_localizer.offline import OfflineRun, coverage_split
+    from landmark_localizer.pose_bags import RunBag
+
+    _, index = world
+    stamps = np.array([0, 10**8, 2 * 10**8], np.int64)
+    truth = np.array([[1.0, 1.5, 0.0], [2.0, 1.5, 0.0], [20.0, 1.5, 0.0]])  # last: off the map
+    poses = [truth[0] + [0.03, 0.0, 0.0], None, truth[2] + [0.0, 0.1, 0.0]]
+    estimates = [Estimate(int(s), 'TRACKING', 0, p, None, None, 10, '', 0.0)
+                 for s, p in zip(stamps, poses, strict=True)]
+    run = RunBag(Path('run'), '/camera', 'sensor_msgs/msg/Image', stamps, [b''] * 3,
+                 np.zeros(0, np.int64), np.zeros((0, 3)), stamps, truth, [])
+    split = coverage_split(OfflineRun(estimates, np.zeros(3), np.zeros(3), 0.0), run, index)
+    assert split['inside']['frames'] == 2 and split['inside']['poses'] == 1
+    assert split['inside']['availability'] == pytest.approx(0.5)
+    assert split['inside']['translation_median_m'] == pytest.approx(0.03)
+    assert split['outside']['frames'] == 1
+    assert split['outside']['translation_p95_m'] == pytest.approx(0.1)

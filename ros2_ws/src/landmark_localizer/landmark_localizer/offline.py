@@ -186,8 +186,9 @@ def coverage_split(result: OfflineRun, run: RunBag, index: DatabaseIndex
     covered_pose = np.asarray(index.region_poses.sum(axis=0)).ravel() > 0
     distance, nearest = index.tree.query(np.where(known[:, None], truth[:, :2], 0.0))
     inside = known & covered_pose[nearest] & (distance <= index.spacing)
-    error = np.array([np.hypot(*(e.pose[:2] - t[:2])) if e.pose is not None else np.nan
-                      for e, t in zip(result.estimates, truth, strict=True)])
+    poses = np.array([e.pose if e.pose is not None else np.full(3, np.nan)
+                      for e in result.estimates], float).reshape(-1, 3)
+    error = np.hypot(*(poses[:, :2] - truth[:, :2]).T)
     split = {}
     for name, mask in (('inside', inside), ('outside', known & ~inside)):
         found = error[mask & np.isfinite(error)]
