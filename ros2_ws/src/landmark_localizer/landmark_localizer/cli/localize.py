@@ -86,24 +86,6 @@ def use_one_core() -> str:
     return ', '.join(done)
 
 
-def parse_settings(items: list[str]) -> dict[str, Any]:
-    """``NAME=VALUE`` items as a dict (values parsed as YAML scalars)."""
-    import yaml
-
-    from landmark_localizer.errors import LocalizerError
-
-    values: dict[str, Any] = {}
-    for item in items:
-        name, sep, text = item.partition('=')
-        if not sep or not name.strip():
-            raise LocalizerError(f'--set wants NAME=VALUE, got {item!r}')
-        try:
-            values[name.strip()] = yaml.safe_load(text.strip())
-        except yaml.YAMLError:
-            values[name.strip()] = text.strip()
-    return values
-
-
 def _progress(quiet: bool):  # noqa: ANN202 - a small closure
     if quiet or not sys.stderr.isatty():
         return None
@@ -119,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
     if args.one_core:  # before numpy is imported: OpenBLAS reads it once
         for name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
             os.environ.setdefault(name, '1')
+    from landmark_db.cli.assignments import parse_assignments
     from landmark_db.database import open_database
     from landmark_localizer.config import LocalizerConfig
     from landmark_localizer.errors import LocalizerError
@@ -132,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         raise LocalizerError(f'{out} exists already (use --overwrite to replace it)')
     if args.limit is not None and args.limit < 1:
         raise LocalizerError(f'--limit must be >= 1, got {args.limit}')
-    config = LocalizerConfig().with_values(parse_settings(args.settings))
+    config = LocalizerConfig().with_values(parse_assignments(args.settings))
     database = open_database(args.db)
     if args.baseline:
         from landmark_localizer.baseline import FullDatabaseLocalizer, build_full_database

@@ -104,16 +104,12 @@ def _sweep(bag: Path, ks: list[int], rhos: list[int], out: Path,
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
+    from landmark_db.cli.assignments import parse_assignments
     from landmark_db.plotting import draw_decomposition
     from visibility_builder.benchmark import sweep
     from visibility_builder.build import build, config_from_flat
-    from visibility_builder.cli.build import _value
 
-    values = {}
-    for item in settings:
-        name, _, text = item.partition('=')
-        values[name] = _value(text)
-    config = config_from_flat(values)
+    config = config_from_flat(parse_assignments(settings))
     result = build(bag, config)
     dc = config.decomposition
     points = sweep(result.world, ks, rhos, dc.algorithm, dc.sigma, dc.seed)

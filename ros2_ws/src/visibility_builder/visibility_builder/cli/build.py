@@ -52,24 +52,11 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
-def _value(text: str) -> Any:
-    import yaml
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError:
-        return text
-
-
 def parse_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Return the ``section.name -> value`` overrides given on the command line."""
-    from visibility_builder.errors import VisibilityBuilderError
+    from landmark_db.cli.assignments import parse_assignments
 
-    values: dict[str, Any] = {}
-    for item in args.settings:
-        name, sep, text = item.partition('=')
-        if not sep or not name:
-            raise VisibilityBuilderError(f'--set wants NAME=VALUE, got {item!r}')
-        values[name.strip()] = _value(text.strip())
+    values = parse_assignments(args.settings)
     for name in ('k', 'rho', 'sigma', 'algorithm'):
         if getattr(args, name) is not None:
             values[f'decomposition.{name}'] = getattr(args, name)
