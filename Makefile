@@ -11,7 +11,7 @@ BUILD_STAMP := $(ROOT)/ros2_ws/install/.colcon-built
 PACKAGING := $(shell find ros2_ws/src -maxdepth 3 \( -name setup.py -o -name setup.cfg \
 	-o -name package.xml -o -path '*/config/*' -o -path '*/resource/*' -o -name CMakeLists.txt \
 	-o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -name '*.cmake' \) -type f)
-PKGS := landmark_db visibility_builder landmark_localizer
+PKGS := landmark_db vbn_common visibility_builder landmark_localizer
 # tf2_msgs (an ament_cmake interface package) is built from its Jazzy definitions because the
 # ROS 2 wheels have none. CMake finds the wheels' type supports through AMENT_PREFIX_PATH, the
 # upstream linters are not installed (BUILD_TESTING=OFF), and cmake/manylinux_paths.cmake

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from visibility_builder.bags import TYPESTORE, BagWriter
+from vbn_common.bags import TYPESTORE, BagWriter
 
 T = TYPESTORE.types
 IMAGE = 'sensor_msgs/msg/Image'

@@ -22,8 +22,8 @@ from landmark_db.database import (
     SampledPoses,
 )
 from landmark_db.database.model import utc_now_iso
-from visibility_builder.geometry.camera import make_camera
-from visibility_builder.geometry.frames import world_points_to_camera
+from vbn_common.geometry.camera import make_camera
+from vbn_common.geometry.frames import world_points_to_camera
 
 CAMERA = make_camera('panoramic')
 HEIGHT = 1.2  # camera height; points are stored relative to the floor

@@ -9,7 +9,7 @@ motion from both model views and the rays are intersected
 CPU time of one two-view solve (ms, single-threaded). Run::
 
     python tests/two_view_bench.py            # 200 trials (a few minutes)
-    pytest -m bench -s tests/unit/visibility_builder/test_two_view_bench.py
+    pytest -m bench -s tests/unit/vbn_common/test_two_view_bench.py
 """
 from __future__ import annotations
 
@@ -28,19 +28,19 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from two_view_samples import random_pose_near, render_views  # noqa: E402
 
-from visibility_builder.errors import VisibilityBuilderError  # noqa: E402
-from visibility_builder.geometry import (  # noqa: E402
+from vbn_common.geometry import (  # noqa: E402
     compose_poses,
     invert_pose,
     make_camera,
     wrap_angle,
 )
-from visibility_builder.geometry.localize import position_from_two_views  # noqa: E402
-from visibility_builder.geometry.two_view import (  # noqa: E402
+from vbn_common.geometry.localize import position_from_two_views  # noqa: E402
+from vbn_common.geometry.two_view import (  # noqa: E402
     TwoViewConfig,
     linear_combination_of_views,
     relative_motion,
 )
+from visibility_builder.errors import VisibilityBuilderError  # noqa: E402
 
 NOISES = (0.0, 0.5, 1.0, 2.0)
 # ':raw' is the method as the thesis gives it, without the Gauss-Newton polish.

@@ -3,7 +3,7 @@
 Exploration panoramas (``bags/room_exploration``, 25 cm grid) serve as model views
 of known pose; the current view is another exploration panorama, or a frame of
 ``bags/room_run`` (another trajectory, exposure changes, JPEG 80). SIFT features
-(the builder's :class:`~visibility_builder.features.SiftConfig`) are matched with
+(the builder's :class:`~vbn_common.features.SiftConfig`) are matched with
 Lowe's ratio test (0.8) and a mutual check; every match of a model view with the
 current view is used. Each method estimates the motion from both model views and
 the rays are intersected; the errors are against ``/ground_truth/pose``. Run::
@@ -26,13 +26,13 @@ import time  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
+from vbn_common.exploration import read_exploration  # noqa: E402
+from vbn_common.features import extract_features  # noqa: E402
+from vbn_common.geometry import camera_from_info, wrap_angle  # noqa: E402
+from vbn_common.geometry.localize import position_from_two_views  # noqa: E402
+from vbn_common.geometry.two_view import TwoViewConfig, relative_motion  # noqa: E402
+from vbn_common.images import decode_image  # noqa: E402
 from visibility_builder.errors import VisibilityBuilderError  # noqa: E402
-from visibility_builder.exploration import read_exploration  # noqa: E402
-from visibility_builder.features import extract_features  # noqa: E402
-from visibility_builder.geometry import camera_from_info, wrap_angle  # noqa: E402
-from visibility_builder.geometry.localize import position_from_two_views  # noqa: E402
-from visibility_builder.geometry.two_view import TwoViewConfig, relative_motion  # noqa: E402
-from visibility_builder.images import decode_image  # noqa: E402
 
 # ':raw' is the method as the thesis gives it, without the Gauss-Newton polish.
 METHODS = ('panoramic_planar', 'panoramic_planar:raw', 'pinhole_planar', 'general_essential')

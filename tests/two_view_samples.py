@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from visibility_builder.geometry import (
+from vbn_common.geometry import (
     CameraModel,
     compose_poses,
     invert_pose,

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from visibility_builder.bags import TYPESTORE, BagWriter, default_qos, open_bag
+from vbn_common.bags import TYPESTORE, BagWriter, default_qos, open_bag
 
 pytestmark = pytest.mark.integration
 
@@ -286,7 +286,7 @@ def test_bad_options(tmp_path: Path, start_process) -> None:
 
 # -- play options, in process ----------------------------------------------------------
 def test_player_start_offset_topics_and_rate(tmp_path: Path, ros_node) -> None:
-    from visibility_builder.ros_tools.play import Player, PlayOptions
+    from vbn_common.ros_tools.play import Player, PlayOptions
     write_synthetic_bag(tmp_path / 'bag', n=30, with_tf=True)  # 1 s at 30 Hz
     with open_bag(tmp_path / 'bag') as reader:
         player = Player(ros_node.node, reader, PlayOptions(

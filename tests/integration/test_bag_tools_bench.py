@@ -18,7 +18,7 @@ import re
 import numpy as np
 import pytest
 
-from visibility_builder.bags import TYPESTORE, BagWriter, default_qos, open_bag
+from vbn_common.bags import TYPESTORE, BagWriter, default_qos, open_bag
 
 pytestmark = [pytest.mark.bench, pytest.mark.integration, pytest.mark.timeout(600)]
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from landmark_db.database import open_database
-from visibility_builder.bags import BagWriter, open_bag
+from vbn_common.bags import BagWriter, open_bag
 
 pytestmark = pytest.mark.integration
 
@@ -166,7 +166,7 @@ def test_live_mode_over_dds_builds_the_same_regions(floor_build, tmp_path: Path,
     from diagnostic_msgs.msg import DiagnosticArray
     from visualization_msgs.msg import MarkerArray
 
-    from visibility_builder.ros_tools.markers import LATCHED_QOS
+    from vbn_common.ros_tools.markers import LATCHED_QOS
     markers: list = []
     progress: list = []
     ros_node.node.create_subscription(MarkerArray, '/builder/regions', markers.append,

@@ -6,7 +6,7 @@ import uuid
 
 import pytest
 
-from visibility_builder.dds_probe import ping
+from vbn_common.dds_probe import ping
 
 pytestmark = pytest.mark.integration
 
@@ -25,7 +25,7 @@ def test_vbn_doctor_reports_rmw_and_a_two_process_exchange(start_process):
 def test_dds_probe_executable_echoes_our_ping(start_process, ros_node):
     # The installed executable, as `ros2 run visibility_builder dds_probe echo` would run it.
     exe = shutil.which('dds_probe')
-    assert exe and exe.endswith('lib/visibility_builder/dds_probe')
+    assert exe and exe.endswith('lib/vbn_common/dds_probe')
     suffix = '_' + uuid.uuid4().hex[:8]
     start_process([exe, 'echo', '--suffix', suffix])
     text = f'ping {uuid.uuid4().hex}'

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from landmark_db.database import SCHEMA_VERSION, open_database
-from visibility_builder.bags import open_bag
-from visibility_builder.geometry.frames import quaternion_yaw
-from visibility_builder.images import decode_image
+from vbn_common.bags import open_bag
+from vbn_common.geometry.frames import quaternion_yaw
+from vbn_common.images import decode_image
 
 pytestmark = pytest.mark.integration
 
@@ -72,8 +72,8 @@ class Listener:
         from tf2_msgs.msg import TFMessage
         from visualization_msgs.msg import MarkerArray
 
-        from visibility_builder.ros_tools.markers import LATCHED_QOS
-        from visibility_builder.ros_tools.tf_broadcast import DYNAMIC_QOS
+        from vbn_common.ros_tools.markers import LATCHED_QOS
+        from vbn_common.ros_tools.tf_broadcast import DYNAMIC_QOS
 
         self.ros = ros_node
         node = ros_node.node
@@ -133,7 +133,7 @@ def listen_to_bag_topics(ros_node) -> None:
     from geometry_msgs.msg import PoseStamped
     from tf2_msgs.msg import TFMessage
 
-    from visibility_builder.ros_tools.tf_broadcast import STATIC_QOS
+    from vbn_common.ros_tools.tf_broadcast import STATIC_QOS
     ros_node.node.create_subscription(PoseStamped, '/ground_truth/pose', lambda m: None, 10)
     ros_node.node.create_subscription(TFMessage, '/tf_static', lambda m: None, STATIC_QOS)
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from visibility_builder.bags import TYPESTORE, BagWriter, bag_paths, default_qos, open_bag
+from vbn_common.bags import TYPESTORE, BagWriter, bag_paths, default_qos, open_bag
 
 pytestmark = pytest.mark.integration
 

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import yaml
 
-from visibility_builder.bags import deserialize, open_bag
-from visibility_builder.transforms import StampedTransform
+from vbn_common.bags import deserialize, open_bag
+from vbn_common.geometry.transforms import StampedTransform
 
 pytestmark = pytest.mark.integration
 
@@ -93,7 +93,7 @@ def test_node_receives_map_to_base_link_from_the_exploration_bag(ros_node, start
 
 
 def test_broadcaster_reaches_another_process(ros_node, start_process) -> None:
-    from visibility_builder.ros_tools.tf_broadcast import TransformBroadcaster
+    from vbn_common.ros_tools.tf_broadcast import TransformBroadcaster
 
     node = ros_node.node
     static = TransformBroadcaster(node, static=True)

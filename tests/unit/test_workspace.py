@@ -9,9 +9,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 WS = ROOT / 'ros2_ws'
-PACKAGES = ('landmark_db', 'visibility_builder', 'landmark_localizer')
-EXECUTABLES = {'landmark_db': ['vbn'], 'visibility_builder': ['dds_probe', 'builder'],
-               'landmark_localizer': ['localizer']}
+PACKAGES = ('landmark_db', 'vbn_common', 'visibility_builder', 'landmark_localizer')
+EXECUTABLES = {'landmark_db': ['vbn'], 'vbn_common': ['dds_probe'],
+               'visibility_builder': ['builder'], 'landmark_localizer': ['localizer']}
 
 
 @pytest.mark.parametrize('package', PACKAGES)

@@ -9,7 +9,6 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={'visibility_builder.scenes': ['*.json']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -19,19 +18,13 @@ setup(
     zip_safe=True,
     maintainer='View-based navigation maintainers',
     maintainer_email='maintainers@view-based-navigation.invalid',
-    description='Offline builder, renderer and bag tools for view-based navigation.',
+    description='Offline builder of the landmark database and renderer of sample bags.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'dds_probe = visibility_builder.dds_probe:main',
             'builder = visibility_builder.builder_node:main',
         ],
         'vbn.commands': [
-            'doctor = visibility_builder.cli.doctor:register',
-            'bag-info = visibility_builder.cli.bag_info:register',
-            'echo = visibility_builder.cli.echo:register',
-            'play = visibility_builder.cli.play:register',
-            'record = visibility_builder.cli.record:register',
             'render = visibility_builder.cli.render:register',
             'build = visibility_builder.cli.build:register',
             'bench-build = visibility_builder.cli.bench_build:register',

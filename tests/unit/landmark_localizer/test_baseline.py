@@ -11,7 +11,7 @@ from landmark_localizer.baseline import (
     load_full_database,
 )
 from landmark_localizer.localizer import LOST, Frame
-from visibility_builder.features import SiftConfig
+from vbn_common.features import SiftConfig
 
 PANORAMA = (1024, 256, 'cylindrical', np.zeros(0),
             np.array([1024 / (2 * np.pi), 0, 512, 0, 1024 / (2 * np.pi), 128, 0, 0, 1.0]))

@@ -15,7 +15,7 @@ from landmark_localizer import conversions
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Estimate
 from landmark_localizer.node import FrameStats, Mailbox, Warnings, reason_kind
-from visibility_builder.geometry.camera import PanoramicCamera, PinholeCamera
+from vbn_common.geometry.camera import PanoramicCamera, PinholeCamera
 
 
 def estimate(pose=(1.0, 2.0, 0.5), cov=None) -> Estimate:

@@ -11,8 +11,8 @@ import pytest
 
 from landmark_localizer.evaluation import evo_ape, pose_accuracy
 from landmark_localizer.pose_bags import PoseRecord, read_pose_bag, write_pose_bag
-from visibility_builder.bags import TYPESTORE, serialize
-from visibility_builder.geometry.frames import wrap_angle, yaw_quaternion
+from vbn_common.bags import TYPESTORE, serialize
+from vbn_common.geometry.frames import wrap_angle, yaw_quaternion
 
 T = TYPESTORE.types
 POSE = 'geometry_msgs/msg/PoseStamped'

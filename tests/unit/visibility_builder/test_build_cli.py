@@ -12,7 +12,7 @@ import subprocess
 from exploration_samples import IMAGE, exploration_messages, image, pose, write_bag
 import pytest
 
-from visibility_builder.bags import BagWriter
+from vbn_common.bags import BagWriter
 
 VBN = 'vbn'
 SENTINEL = b'the previous database'

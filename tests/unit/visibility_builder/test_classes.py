@@ -302,7 +302,7 @@ def test_bad_inputs_are_clear_errors():
 
 
 def test_single_threaded_blas_restores_the_thread_count():
-    from visibility_builder.blas import _openblas_thread_controls, single_threaded_blas
+    from vbn_common.blas import _openblas_thread_controls, single_threaded_blas
 
     controls = _openblas_thread_controls()
     before = [get() for get, _ in controls]

@@ -15,14 +15,14 @@ import time
 import numpy as np
 import pytest
 
+from landmark_db.scenes import resolve_scene
+from vbn_common.exploration import read_exploration
+from vbn_common.features import extract_many
+from vbn_common.geometry.camera import make_camera
 from visibility_builder.classes import ClassConfig, correspondence_classes
-from visibility_builder.exploration import read_exploration
-from visibility_builder.features import extract_many
 from visibility_builder.filters import FilterConfig, retain_good_features
-from visibility_builder.geometry.camera import make_camera
 from visibility_builder.purity import class_purity, keypoint_wall_points
 from visibility_builder.render.renderer import Renderer
-from visibility_builder.scenes import resolve_scene
 from visibility_builder.verification import VerifyConfig, verify_classes
 
 ROOM = Path(__file__).resolve().parents[3] / 'bags' / 'room_exploration'

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from vbn_common.features import ImageFeatures
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.features import ImageFeatures
 from visibility_builder.model_views import (
     ImageTable,
     ModelViewConfig,

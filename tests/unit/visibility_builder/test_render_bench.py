@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
-from visibility_builder.geometry.camera import make_camera
+from landmark_db.scenes import resolve_scene
+from vbn_common.geometry.camera import make_camera
 from visibility_builder.render.renderer import Renderer
-from visibility_builder.scenes import resolve_scene
 
 
 @pytest.mark.bench

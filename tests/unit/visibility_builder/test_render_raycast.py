@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from landmark_db.scene import Scene
-from visibility_builder.geometry.camera import PanoramicCamera, PinholeCamera
-from visibility_builder.geometry.frames import world_points_to_camera
+from vbn_common.geometry.camera import PanoramicCamera, PinholeCamera
+from vbn_common.geometry.frames import world_points_to_camera
 from visibility_builder.render.renderer import Renderer, cast_rays
 from visibility_builder.render.textures import build_wall_atlas
 

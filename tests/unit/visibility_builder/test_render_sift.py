@@ -5,11 +5,11 @@ import cv2
 import numpy as np
 import pytest
 
-from visibility_builder.geometry.camera import make_camera
+from landmark_db.scenes import resolve_scene
+from vbn_common.geometry.camera import make_camera
 from visibility_builder.render.effects import ImageEffects, apply_effects
 from visibility_builder.render.renderer import Renderer
 from visibility_builder.render.textures import sample_photographs
-from visibility_builder.scenes import resolve_scene
 
 
 @pytest.fixture(scope='module')

@@ -9,10 +9,10 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from landmark_db.scenes import resolve_scene
+from vbn_common.exploration import read_exploration
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.exploration import read_exploration
 from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
-from visibility_builder.scenes import resolve_scene
 from visibility_builder.synthesis.bags import BagSpec, write_bag
 
 ROOT = Path(__file__).resolve().parents[3]

@@ -11,9 +11,9 @@ from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
 from landmark_db.cli.main import main as vbn_main
+from landmark_db.scenes import resolve_scene
+from vbn_common.geometry.frames import compose_poses
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.frames import compose_poses
-from visibility_builder.scenes import resolve_scene
 from visibility_builder.synthesis.bags import START_NS, BagSpec, write_bag
 from visibility_builder.synthesis.grid import exploration_poses
 

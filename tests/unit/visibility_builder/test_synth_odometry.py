@@ -4,8 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from visibility_builder.geometry.frames import compose_poses, wrap_angle
-from visibility_builder.scenes import resolve_scene
+from landmark_db.scenes import resolve_scene
+from vbn_common.geometry.frames import compose_poses, wrap_angle
 from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
 from visibility_builder.synthesis.trajectory import kidnapped_trajectory, run_trajectory
 

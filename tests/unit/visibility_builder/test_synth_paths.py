@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from landmark_db.scene import Scene
+from landmark_db.scenes import resolve_scene
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.scenes import resolve_scene
 from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.trajectory import (
     RunParameters,

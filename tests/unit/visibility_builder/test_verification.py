@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from vbn_common.geometry.camera import PinholeCamera, make_camera
 from visibility_builder.classes import ClassResult
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import PinholeCamera, make_camera
 from visibility_builder.verification import VerifyConfig, verify_classes
 
 PANORAMA = make_camera('panoramic')

@@ -14,8 +14,8 @@ comparison in ``vbn bench-localize``:
   Lowe's ratio test, the exploration images with most matches as candidates, each
   verified by the two-view solve, and the pose from the two images with most
   verified matches by the same solve as ours
-  (:func:`~visibility_builder.geometry.two_view.relative_motion` and
-  :func:`~visibility_builder.geometry.localize.position_from_views`, as
+  (:func:`~vbn_common.geometry.two_view.relative_motion` and
+  :func:`~vbn_common.geometry.localize.position_from_views`, as
   :mod:`landmark_localizer.pose` uses them). It has no state: every frame is a
   global localization.
 
@@ -36,12 +36,12 @@ import numpy as np
 
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import LOST, TRACKING, Estimate, Frame
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.features import SiftConfig, extract_features, extract_many
-from visibility_builder.geometry.camera import CameraModel, camera_from_info
-from visibility_builder.geometry.frames import compose_poses, invert_pose
-from visibility_builder.geometry.localize import position_from_views
-from visibility_builder.geometry.two_view import RelativeMotion, TwoViewConfig, relative_motion
+from vbn_common.errors import VbnCommonError
+from vbn_common.features import SiftConfig, extract_features, extract_many
+from vbn_common.geometry.camera import CameraModel, camera_from_info
+from vbn_common.geometry.frames import compose_poses, invert_pose
+from vbn_common.geometry.localize import position_from_views
+from vbn_common.geometry.two_view import RelativeMotion, TwoViewConfig, relative_motion
 
 __all__ = ['BaselineConfig', 'FullDatabaseLocalizer', 'FullFeatureDatabase',
            'build_full_database', 'load_full_database']
@@ -145,11 +145,11 @@ def build_full_database(bag: str | os.PathLike[str], sift: SiftConfig | None = N
             _LOG.info('full feature database from %s', cache)
             return cached
         _LOG.info('%s holds other SIFT settings: extracting again', cache)
-    from visibility_builder.exploration import read_exploration
+    from vbn_common.exploration import read_exploration
 
     try:
         exploration = read_exploration(bag)
-    except VisibilityBuilderError as error:
+    except VbnCommonError as error:
         raise LocalizerError(str(error)) from None
     start = time.perf_counter()
     features = extract_many([f.image for f in exploration.frames], sift, workers)
@@ -272,7 +272,7 @@ class FullDatabaseLocalizer:
                 motion = relative_motion(self.database.keypoints[train_a[pick]].astype(float),
                                          query_uv[rows_a[pick]], self.camera,
                                          config=self.two_view, rng=self.rng)
-            except VisibilityBuilderError:
+            except VbnCommonError:
                 continue
             n_in = int(motion.inliers.sum())
             if n_in >= config.min_inliers and motion.residual * focal <= config.max_residual_px:
@@ -285,7 +285,7 @@ class FullDatabaseLocalizer:
                 try:
                     est = position_from_views(self.database.view_poses[[a, b]], [m_a, m_b],
                                               min_ray_angle=min_angle)
-                except VisibilityBuilderError:
+                except VbnCommonError:
                     continue
                 if est.in_front and np.all(np.isfinite(est.pose)):
                     return est.pose, est.covariance, n_a + n_b

@@ -27,9 +27,9 @@ import numpy as np
 
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Estimate
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import CameraModel, camera_from_info
-from visibility_builder.geometry.frames import quaternion_yaw, yaw_quaternion
+from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.camera import CameraModel, camera_from_info
+from vbn_common.geometry.frames import quaternion_yaw, yaw_quaternion
 
 __all__ = [
     'camera_mismatch',
@@ -183,7 +183,7 @@ def camera_mismatch(info: Any, expected: CameraModel) -> str:
     wanted = _describe_camera(expected.width, expected.height, expected.kind, k_expected)
     try:
         camera = camera_from_info(info)
-    except VisibilityBuilderError as error:
+    except VbnCommonError as error:
         return f'CameraInfo cannot be used ({error}); the database camera is {wanted}'
     k = np.asarray(camera.camera_info().k, float)
     same = (camera.kind == expected.kind and camera.width == expected.width

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from landmark_localizer.errors import LocalizerError
-from visibility_builder.geometry.frames import wrap_angle
+from vbn_common.geometry.frames import wrap_angle
 
 __all__ = ['Accuracy', 'Check', 'Latency', 'RegionChanges', 'RunEvaluation', 'Thresholds',
            'associate', 'check_run', 'count_region_changes', 'evaluate_run', 'evo_ape',

@@ -30,9 +30,9 @@ from scipy.spatial import cKDTree
 from landmark_db.database import LandmarkDatabase
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.matching import grouped_nearest, squared_distances
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import CameraModel, camera_from_info
-from visibility_builder.geometry.frames import BASE_TO_CAMERA_ROTATION
+from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.camera import CameraModel, camera_from_info
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 
 __all__ = ['DatabaseIndex', 'RegionData', 'ViewData']
 
@@ -116,7 +116,7 @@ class DatabaseIndex:
         self.k = int(database.info.k)
         try:
             self.camera: CameraModel = camera_from_info(_CameraInfo(database.info.camera))
-        except VisibilityBuilderError as error:
+        except VbnCommonError as error:
             raise LocalizerError(f'database camera: {error}') from None
         mount = database.info.parameters.get('camera_mount', [0.0, 0.0, 0.0])
         self.camera_mount = np.asarray(mount, float).reshape(3)

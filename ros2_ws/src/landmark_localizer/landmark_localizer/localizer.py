@@ -32,8 +32,8 @@ from landmark_localizer.pose import PoseSolution, base_pose, refine_pose, solve_
 from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
-from visibility_builder.features import SiftConfig, extract_features_scaled
-from visibility_builder.geometry.frames import invert_pose
+from vbn_common.features import SiftConfig, extract_features_scaled
+from vbn_common.geometry.frames import invert_pose
 
 __all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
 

@@ -58,7 +58,7 @@ import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
-from visibility_builder.ros_tools.node_main import run_node
+from vbn_common.ros_tools.node_main import run_node
 
 __all__ = ['IMAGE_TOPICS', 'Mailbox', 'NodeSettings', 'config_descriptions', 'main']
 
@@ -299,10 +299,10 @@ def _make_node() -> Any:
     from landmark_localizer.index import DatabaseIndex
     from landmark_localizer.localizer import TRACKING, Frame, Localizer
     from landmark_localizer.odometry import ACCEPTED, JUMP, TIME_BACK, OdometryBuffer
-    from visibility_builder.images import ImageDecodeError, decode_image
-    from visibility_builder.ros_tools.markers import LATCHED_QOS, region_markers
-    from visibility_builder.ros_tools.tf_broadcast import TransformBroadcaster
-    from visibility_builder.transforms import StampedTransform, correction
+    from vbn_common.geometry.transforms import StampedTransform, correction
+    from vbn_common.images import ImageDecodeError, decode_image
+    from vbn_common.ros_tools.markers import LATCHED_QOS, region_markers
+    from vbn_common.ros_tools.tf_broadcast import TransformBroadcaster
 
     class LocalizerNode(Node):
         """Declares the parameters, opens the database, localizes each image."""

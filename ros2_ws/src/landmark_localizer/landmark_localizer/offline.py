@@ -24,7 +24,7 @@ from landmark_localizer.evaluation import (
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
 from landmark_localizer.pose_bags import PoseRecord, RunBag
-from visibility_builder.geometry.frames import wrap_angle
+from vbn_common.geometry.frames import wrap_angle
 
 __all__ = ['OfflineRun', 'coverage_split', 'evaluate_offline', 'interpolate_poses',
            'localize_run']

@@ -35,7 +35,7 @@ def save_trajectory_figure(path: str | os.PathLike[str], database: LandmarkDatab
         pose_stamps_ns: (p,) stamps of the published poses.
         poses: (p, 3) published poses.
         frame_stamps_ns: (n,) every frame's stamp, to mark those without a pose.
-        scene: The polygon scene (``visibility_builder.scenes.resolve_scene``) or None.
+        scene: The polygon scene (``landmark_db.scenes.resolve_scene``) or None.
         title: Figure title.
         dpi: Resolution.
 

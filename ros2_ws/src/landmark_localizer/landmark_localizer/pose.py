@@ -18,10 +18,10 @@ import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.frames import compose_poses, invert_pose, wrap_angle
-from visibility_builder.geometry.localize import PoseEstimate, position_from_views
-from visibility_builder.geometry.two_view import (
+from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
+from vbn_common.geometry.localize import PoseEstimate, position_from_views
+from vbn_common.geometry.two_view import (
     RelativeMotion,
     TwoViewConfig,
     pointwise_planar_residuals,
@@ -91,7 +91,7 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
             motion: RelativeMotion = relative_motion(
                 view.keypoints[rows[have]], uv[have], index.camera,
                 method=config.method or None, config=two_view, rng=rng)
-        except VisibilityBuilderError:
+        except VbnCommonError:
             continue
         n_in = int(motion.inliers.sum())
         residual_px = motion.residual * focal
@@ -119,7 +119,7 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     try:
         estimate = position_from_views(np.array(poses), motions,
                                        min_ray_angle=math.radians(0.5))
-    except VisibilityBuilderError:
+    except VbnCommonError:
         return None
     if not estimate.in_front:
         return None

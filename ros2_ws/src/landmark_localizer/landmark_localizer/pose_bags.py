@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 
 from landmark_localizer.errors import LocalizerError
-from visibility_builder.bags import TYPESTORE, BagWriter, default_qos, deserialize, open_bag
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.frames import quaternion_yaw, yaw_quaternion
+from vbn_common.bags import TYPESTORE, BagWriter, default_qos, deserialize, open_bag
+from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.frames import quaternion_yaw, yaw_quaternion
 
 __all__ = ['PoseBag', 'PoseRecord', 'RunBag', 'read_pose_bag', 'read_run_bag',
            'write_pose_bag']
@@ -84,7 +84,7 @@ class RunBag:
 
     def decode(self, i: int) -> np.ndarray:
         """Deserialize and decode image ``i`` to grey (what the localizer's latency includes)."""
-        from visibility_builder.images import decode_image
+        from vbn_common.images import decode_image
 
         return decode_image(deserialize(self.images[i], self.image_type))
 
@@ -173,7 +173,7 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
     """
     try:
         bag = open_bag(path)
-    except VisibilityBuilderError as error:
+    except VbnCommonError as error:
         raise LocalizerError(str(error)) from None
     with bag:
         topics = bag.topics
@@ -210,7 +210,7 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
                     truth[0].append(_stamp(msg.header, bag_ns))
                     truth[1].append(_planar_pose(msg))
                     truth_messages.append((bag_ns, msgtype, raw))
-        except VisibilityBuilderError as error:
+        except VbnCommonError as error:
             raise LocalizerError(f'bag {path}: {error}') from None
     if not images:
         raise LocalizerError(f'bag {path} has no messages on {image_topic}')
@@ -295,7 +295,7 @@ def write_pose_bag(path: str | os.PathLike[str], records: Iterable[PoseRecord],
                     header=header, pose=_T['geometry_msgs/msg/PoseWithCovariance'](
                         pose=pose, covariance=covariance_6x6(cov))))
                 n_poses += 1
-    except VisibilityBuilderError as error:
+    except VbnCommonError as error:
         raise LocalizerError(f'cannot write {path}: {error}') from None
     return n_poses
 
@@ -315,7 +315,7 @@ def read_pose_bag(path: str | os.PathLike[str]) -> PoseBag:
     """
     try:
         bag = open_bag(path)
-    except VisibilityBuilderError as error:
+    except VbnCommonError as error:
         raise LocalizerError(str(error)) from None
     poses: tuple[list[int], list[np.ndarray]] = ([], [])
     truth: tuple[list[int], list[np.ndarray]] = ([], [])
@@ -347,7 +347,7 @@ def read_pose_bag(path: str | os.PathLike[str]) -> PoseBag:
                     target = poses if topic == POSE_TOPIC else truth
                     target[0].append(_stamp(msg.header, bag_ns))
                     target[1].append(_planar_pose(msg))
-        except VisibilityBuilderError as error:
+        except VbnCommonError as error:
             raise LocalizerError(f'bag {path}: {error}') from None
     pose_stamps, pose_values = _sorted(*poses)
     truth_stamps, truth_values = _sorted(*truth)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from landmark_localizer.index import DatabaseIndex
-from visibility_builder.geometry.frames import compose_poses, invert_pose
+from vbn_common.geometry.frames import compose_poses, invert_pose
 
 __all__ = ['MotionPredictor', 'choose_region']
 

@@ -13,8 +13,8 @@ database's k).
 :func:`verify`: a candidate is checked geometrically: the image's features are matched
 to each of the region's model views with the symmetry check the thesis suggests
 (6.2.1: a match must also hold matched back from the model view), the motion to each
-view is solved (:func:`visibility_builder.geometry.two_view.relative_motion`) and the
-rays intersected (:func:`~visibility_builder.geometry.localize.position_from_views`);
+view is solved (:func:`vbn_common.geometry.two_view.relative_motion`) and the
+rays intersected (:func:`~vbn_common.geometry.localize.position_from_views`);
 a candidate passes with enough inliers per view, a bounded residual and rays that
 meet in front of the views. The best candidate (most inliers) wins.
 """
@@ -28,7 +28,7 @@ from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.matching import mutual_matches
 from landmark_localizer.pose import PoseSolution, solve_pose
-from visibility_builder.features import ImageFeatures
+from vbn_common.features import ImageFeatures
 
 __all__ = ['Candidate', 'Verified', 'verify', 'vote']
 

@@ -48,13 +48,13 @@ from landmark_db.database.model import utc_now_iso
 from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
+from vbn_common.exploration import Exploration, ReadConfig, read_exploration
+from vbn_common.features import ImageFeatures, SiftConfig, extract_many
+from vbn_common.geometry.camera import camera_from_info
+from vbn_common.geometry.frames import compose_poses, invert_pose
 from visibility_builder.classes import ClassConfig, correspondence_classes
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.exploration import Exploration, ReadConfig, read_exploration
-from visibility_builder.features import ImageFeatures, SiftConfig, extract_many
 from visibility_builder.filters import FilterConfig, retain_good_features
-from visibility_builder.geometry.camera import camera_from_info
-from visibility_builder.geometry.frames import compose_poses, invert_pose
 from visibility_builder.model_views import (
     ImageTable,
     ModelViewConfig,

@@ -30,8 +30,9 @@ import threading
 import time
 from typing import Any
 
+from vbn_common.errors import VbnCommonError
+from vbn_common.ros_tools.node_main import run_node
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.ros_tools.node_main import run_node
 
 __all__ = ['LIVE_TOPICS', 'main']
 
@@ -59,7 +60,9 @@ def _make_node() -> Any:
     from std_srvs.srv import Trigger
     from visualization_msgs.msg import MarkerArray
 
-    from visibility_builder.bags import BagWriter
+    from vbn_common.bags import BagWriter
+    from vbn_common.ros_tools.markers import LATCHED_QOS, region_markers
+    from vbn_common.ros_tools.record import Recorder
     from visibility_builder.build import (
         BuildConfig,
         build,
@@ -67,8 +70,6 @@ def _make_node() -> Any:
         flat_config,
         setting_descriptions,
     )
-    from visibility_builder.ros_tools.markers import LATCHED_QOS, region_markers
-    from visibility_builder.ros_tools.record import Recorder
 
     class BuilderNode(Node):
         """Declares the parameters, records (live mode), builds, publishes."""
@@ -206,7 +207,7 @@ def _make_node() -> Any:
                     from visibility_builder.cli.build import write_report
                     write_report(Path(self.report_dir), result, None)
                 self.get_logger().info(self.result_text)
-            except VisibilityBuilderError as error:
+            except (VisibilityBuilderError, VbnCommonError) as error:
                 self.result_ok, self.result_text = False, str(error)
                 self.stage, self.detail = 'failed', str(error)
                 self.exit_code = 1

@@ -112,8 +112,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from visibility_builder.allocator import reuse_freed_memory
-from visibility_builder.blas import set_blas_threads, single_threaded_blas
+from vbn_common.allocator import reuse_freed_memory
+from vbn_common.blas import set_blas_threads, single_threaded_blas
 from visibility_builder.errors import VisibilityBuilderError
 
 __all__ = [

@@ -39,8 +39,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from landmark_db.database.model import ModelView
+from vbn_common.features import ImageFeatures
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.features import ImageFeatures
 
 __all__ = ['ImageTable', 'ModelViewConfig', 'class_descriptors', 'extra_features',
            'select_model_views']

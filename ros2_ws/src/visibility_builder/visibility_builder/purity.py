@@ -30,9 +30,9 @@ import logging
 
 import numpy as np
 
+from vbn_common.geometry.camera import CameraModel
+from vbn_common.geometry.frames import world_points_to_camera
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import CameraModel
-from visibility_builder.geometry.frames import world_points_to_camera
 from visibility_builder.render.renderer import Renderer
 
 __all__ = ['PurityReport', 'class_purity', 'keypoint_wall_points']

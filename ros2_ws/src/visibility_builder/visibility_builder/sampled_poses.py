@@ -135,7 +135,7 @@ def sample_poses(exploration: Any, config: SamplingConfig | None = None) -> Pose
     """Group the frames of an exploration into sampled poses and build the pose graph.
 
     Args:
-        exploration: an :class:`~visibility_builder.exploration.Exploration` (anything
+        exploration: an :class:`~vbn_common.exploration.Exploration` (anything
             with ``base_poses()`` and ``camera_poses()`` returning ``(n, 3)`` arrays).
         config: tolerances and graph parameters (default :class:`SamplingConfig`).
 

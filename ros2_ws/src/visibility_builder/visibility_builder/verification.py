@@ -48,9 +48,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from vbn_common.geometry.camera import CameraModel
 from visibility_builder.classes import ClassResult
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import CameraModel
 
 __all__ = ['VerifyConfig', 'verify_classes']
 

@@ -202,13 +202,13 @@ def run(args: argparse.Namespace) -> int:
 
 def _played_topics(run_bag: Path) -> list[str]:
     from landmark_localizer.errors import LocalizerError
-    from visibility_builder.bags import open_bag
-    from visibility_builder.errors import VisibilityBuilderError
+    from vbn_common.bags import open_bag
+    from vbn_common.errors import VbnCommonError
 
     try:
         with open_bag(run_bag) as bag:
             return [t for t in PLAYED_TOPICS if t in bag.topics]
-    except VisibilityBuilderError as error:
+    except VbnCommonError as error:
         raise LocalizerError(str(error)) from None
 
 
@@ -287,7 +287,7 @@ def evaluate_demo(out: Path, recorded: Path, db: Path, run_bag: Path, scene: str
               f'{number("latency_p95_ms"):.1f} ms, max {number("latency_max_ms"):.1f} ms')
     scene_obj = None
     if scene:
-        from visibility_builder.scenes import resolve_scene
+        from landmark_db.scenes import resolve_scene
         scene_obj = resolve_scene(scene)
     png = save_trajectory_figure(out / 'trajectory.png', open_database(db), truth_stamps,
                                  truth_poses, bag.pose_stamps_ns, bag.poses, frames, scene_obj,

@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
     database = open_database(args.db)
     if args.baseline:
         from landmark_localizer.baseline import FullDatabaseLocalizer, build_full_database
-        from visibility_builder.features import SiftConfig
+        from vbn_common.features import SiftConfig
 
         sift = SiftConfig(**{k: v for k, v in database.info.sift.items()
                              if k in SiftConfig.__dataclass_fields__})

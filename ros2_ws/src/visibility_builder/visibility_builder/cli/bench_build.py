@@ -119,7 +119,7 @@ def _sweep(bag: Path, ks: list[int], rhos: list[int], out: Path,
           f'{"coverage":>8} {"mean size":>9}')
     scene = None
     try:
-        from visibility_builder.scenes import resolve_scene
+        from landmark_db.scenes import resolve_scene
         scene = resolve_scene(bag.name.split('_')[0])
     except Exception:  # noqa: BLE001 - no shipped scene of that name: draw without walls
         scene = None

@@ -133,7 +133,7 @@ def write_report(folder: Path, result: Any, scene_name: str | None) -> None:
     folder.mkdir(exist_ok=True)
     scene = None
     if scene_name:
-        from visibility_builder.scenes import resolve_scene
+        from landmark_db.scenes import resolve_scene
         scene = resolve_scene(scene_name)
     db = result.database
     save_decomposition_figure(

@@ -72,9 +72,9 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from landmark_db.scenes import resolve_scene
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.render.effects import ImageEffects
-    from visibility_builder.scenes import resolve_scene
     from visibility_builder.synthesis.trajectory import RunParameters
 
     scene = resolve_scene(args.scene)
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     if args.snapshot is not None:
         import cv2
 
-        from visibility_builder.geometry.camera import make_camera
+        from vbn_common.geometry.camera import make_camera
         from visibility_builder.render.renderer import Renderer
 
         x, y, yaw_deg = args.snapshot

@@ -3,7 +3,7 @@
 Core modules (no rclpy, no message types): :mod:`.textures` (wall textures),
 :mod:`.renderer` (ray casting, texture sampling, ground truth) and :mod:`.effects`
 (per-frame noise, blur, exposure). The camera models and frames it renders through
-are shared with the builder and the localizer: :mod:`visibility_builder.geometry`.
+are shared with the builder and the localizer: :mod:`vbn_common.geometry`.
 """
 from __future__ import annotations
 

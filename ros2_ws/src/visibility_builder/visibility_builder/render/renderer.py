@@ -4,7 +4,7 @@ The floor plan's perimeter and obstacles become vertical walls of ``wall_height`
 metres between a floor and a ceiling plane; the camera sits at ``camera_height`` on
 a robot that moves in the plane (the planar-motion setting of Section 7.5). Because
 the camera neither pitches nor rolls, a vertical wall line projects to one image
-column for both camera models (:mod:`visibility_builder.geometry.camera`), so rendering is
+column for both camera models (:mod:`vbn_common.geometry.camera`), so rendering is
 
 1. one horizontal ray per image column, intersected with every wall segment at once
    (``(columns, segments)`` arrays): the nearest hit gives the wall, the arc length
@@ -29,8 +29,8 @@ import cv2
 import numpy as np
 
 from landmark_db.scene import Scene
+from vbn_common.geometry.camera import CameraModel
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import CameraModel
 from visibility_builder.render.effects import ImageEffects, apply_effects
 from visibility_builder.render.textures import WallAtlas, build_wall_atlas
 
@@ -96,7 +96,7 @@ class Renderer:
 
     Args:
         scene: the floor plan (walls extruded to ``scene.wall_height``).
-        camera: a :class:`~visibility_builder.geometry.camera.CameraModel`.
+        camera: a :class:`~vbn_common.geometry.camera.CameraModel`.
         atlas: wall textures; built from ``scene.texture_seed`` when ``None``.
     """
 

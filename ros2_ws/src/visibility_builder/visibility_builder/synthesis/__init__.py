@@ -3,7 +3,7 @@
 Core modules (no rclpy): :mod:`.grid` (exploration poses), :mod:`.trajectory`
 (smooth runs, kidnapped variant), :mod:`.odometry` (wheel odometry with seeded
 drift). :mod:`.messages` converts to ROS 2 messages (rosbags types) and
-:mod:`.bags` writes the bags through :mod:`visibility_builder.bags`.
+:mod:`.bags` writes the bags through :mod:`vbn_common.bags`.
 """
 from __future__ import annotations
 

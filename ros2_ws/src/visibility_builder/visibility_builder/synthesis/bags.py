@@ -42,10 +42,10 @@ from pathlib import Path
 import numpy as np
 
 from landmark_db.scene import Scene
-from visibility_builder.bags import BagWriter, default_qos
+from vbn_common.bags import BagWriter, default_qos
+from vbn_common.geometry.camera import make_camera
+from vbn_common.geometry.frames import compose_poses, invert_pose
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import make_camera
-from visibility_builder.geometry.frames import compose_poses, invert_pose
 from visibility_builder.render.effects import ImageEffects
 from visibility_builder.render.renderer import Renderer
 from visibility_builder.synthesis import messages

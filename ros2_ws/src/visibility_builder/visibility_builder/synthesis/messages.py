@@ -1,7 +1,7 @@
 """Message conversions of the bag synthesis: numpy and dataclasses to rosbags messages.
 
 The only synthesis module that touches ROS message types (through
-:data:`visibility_builder.bags.TYPESTORE`, ROS 2 Jazzy definitions). Frame names
+:data:`vbn_common.bags.TYPESTORE`, ROS 2 Jazzy definitions). Frame names
 follow REP 105 and the project's design: ``map``, ``odom``, ``base_link`` and the
 optical ``camera`` frame.
 """
@@ -12,10 +12,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from visibility_builder.bags import TYPESTORE
+from vbn_common.bags import TYPESTORE
+from vbn_common.geometry.camera import CameraInfoFields
+from vbn_common.geometry.frames import BASE_TO_CAMERA_QUATERNION, yaw_quaternion
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.camera import CameraInfoFields
-from visibility_builder.geometry.frames import BASE_TO_CAMERA_QUATERNION, yaw_quaternion
 
 __all__ = [
     'camera_info_message',

@@ -22,8 +22,8 @@ import math
 
 import numpy as np
 
+from vbn_common.geometry.frames import wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.frames import wrap_angle
 from visibility_builder.synthesis.trajectory import Trajectory
 
 __all__ = ['OdometryNoise', 'OdometryTrack', 'simulate_odometry']

@@ -26,8 +26,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from landmark_db.scene import Scene
+from vbn_common.geometry.frames import wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.geometry.frames import wrap_angle
 
 __all__ = ['RunParameters', 'Trajectory', 'kidnapped_trajectory', 'run_trajectory']
 
