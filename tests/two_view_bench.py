@@ -28,19 +28,17 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from two_view_samples import random_pose_near, render_views  # noqa: E402
 
+from vbn_common.errors import VbnCommonError  # noqa: E402
 from vbn_common.geometry import (  # noqa: E402
     compose_poses,
     invert_pose,
     make_camera,
     wrap_angle,
 )
+from vbn_common.geometry.linear_combination import linear_combination_of_views  # noqa: E402
 from vbn_common.geometry.localize import position_from_two_views  # noqa: E402
-from vbn_common.geometry.two_view import (  # noqa: E402
-    TwoViewConfig,
-    linear_combination_of_views,
-    relative_motion,
-)
-from visibility_builder.errors import VisibilityBuilderError  # noqa: E402
+from vbn_common.geometry.motion import TwoViewConfig  # noqa: E402
+from vbn_common.geometry.two_view import relative_motion  # noqa: E402
 
 NOISES = (0.0, 0.5, 1.0, 2.0)
 # ':raw' is the method as the thesis gives it, without the Gauss-Newton polish.
@@ -116,7 +114,7 @@ def run(trials: int = 200, seed: int = 7, n_points: int = 50) -> list[dict]:
                         motion_a, motion_b, elapsed = _solve(method, camera, views, config)
                         est = position_from_two_views(views.poses[0], motion_a,
                                                       views.poses[1], motion_b)
-                    except VisibilityBuilderError:
+                    except VbnCommonError:
                         failures += 1
                         continue
                     truth = views.poses[2]
@@ -173,7 +171,7 @@ def full_pose_times(trials: int = 100, seed: int = 1) -> str:
                 try:
                     motion_a, motion_b, _ = _solve(method, camera, views, config)
                     position_from_two_views(views.poses[0], motion_a, views.poses[1], motion_b)
-                except VisibilityBuilderError:
+                except VbnCommonError:
                     pass
                 times.append(time.process_time() - start)
             lines.append(f'| {kind} | {method} | {1e3 * np.median(times):.1f} | '

@@ -26,13 +26,14 @@ import time  # noqa: E402
 import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
+from vbn_common.errors import VbnCommonError  # noqa: E402
 from vbn_common.exploration import read_exploration  # noqa: E402
 from vbn_common.features import extract_features  # noqa: E402
 from vbn_common.geometry import camera_from_info, wrap_angle  # noqa: E402
 from vbn_common.geometry.localize import position_from_two_views  # noqa: E402
-from vbn_common.geometry.two_view import TwoViewConfig, relative_motion  # noqa: E402
+from vbn_common.geometry.motion import TwoViewConfig  # noqa: E402
+from vbn_common.geometry.two_view import relative_motion  # noqa: E402
 from vbn_common.images import decode_image  # noqa: E402
-from visibility_builder.errors import VisibilityBuilderError  # noqa: E402
 
 # ':raw' is the method as the thesis gives it, without the Gauss-Newton polish.
 METHODS = ('panoramic_planar', 'panoramic_planar:raw', 'pinhole_planar', 'general_essential')
@@ -137,7 +138,7 @@ def evaluate(model_bag: str, current_bag: str | None, count: int, seed: int = 3)
                 motion_b, n_b, _ = solve(camera, model_feats(b), current_feats(c), method)
                 est = position_from_two_views(model_poses[a], motion_a, model_poses[b],
                                               motion_b)
-            except VisibilityBuilderError as exc:
+            except VbnCommonError as exc:
                 row['failures'] += 1
                 print(f'  {method} {a} {b} {c}: {exc}', file=sys.stderr)
                 continue

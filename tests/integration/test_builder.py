@@ -137,7 +137,7 @@ def test_killed_build_leaves_the_previous_database(floor_build, tmp_path: Path) 
 
 
 def test_live_mode_over_dds_builds_the_same_regions(floor_build, tmp_path: Path,
-                                                   start_process, ros_node) -> None:
+                                                    start_process, ros_node) -> None:
     from std_srvs.srv import Trigger
 
     db = tmp_path / 'live.db'

@@ -458,7 +458,7 @@ def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) 
     for i in range(1000):
         msg = frames[i % 40]
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp(5_000_000),
-                                                                 1_000_000_000)
+                                                                1_000_000_000)
         pub.compressed.publish(msg)
         next_time += period
         while time.perf_counter() < next_time:

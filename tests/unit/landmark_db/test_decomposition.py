@@ -126,14 +126,14 @@ def test_rho_overlap_is_checked_by_the_validator():
 def test_validator_reports_each_kind_of_problem():
     world = line_world([[1, 0], [1, 0], [0, 1], [1, 0], [1, 0]])
     good = Decomposition('B1', 1, 0, 0, 0.0, [Region([0, 1], [0]), Region([3, 4], [0]),
-                                               Region([2], [1])])
+                                              Region([2], [1])])
     assert validate(world, good) == []
     split = Decomposition('B1', 1, 0, 0, 0.0, [Region([0, 1, 3, 4], [0]), Region([2], [1])])
     assert any('not connected' in p for p in validate(world, split))
     blind = Decomposition('B1', 1, 0, 0, 0.0, [Region([0, 1, 2], [0]), Region([3, 4], [0])])
     assert any('not visible from pose 2' in p for p in validate(world, blind))
     too_many = Decomposition('B1', 1, 0, 0, 0.0, [Region([0, 1], [0, 1]), Region([3, 4], [0]),
-                                                   Region([2], [1])])
+                                                  Region([2], [1])])
     assert any('expected k = 1' in p for p in validate(world, too_many))
     missing = Decomposition('B1', 1, 0, 0, 0.0, [Region([0, 1], [0]), Region([2], [1])])
     assert any('not listed as uncovered' in p for p in validate(world, missing))

@@ -36,7 +36,7 @@ def test_point_segment_distance_broadcasts_points_against_segments() -> None:
     d = point_segment_distance(points[:, None, :], starts, ends)
     assert d.shape == (3, 2)
     np.testing.assert_allclose(d, [[2.0, np.hypot(0.5, 1.0)], [np.hypot(2.0, 0.5), 3.0],
-                                [0.0, 0.0]])
+                                   [0.0, 0.0]])
 
 
 def test_nearest_segment_distance_and_scene_wall_distance_agree() -> None:

@@ -129,7 +129,7 @@ def test_pose_grid_of_a_square_room() -> None:
     # Grid points on the walls are dropped, leaving the inner 3 x 3 block.
     assert len(poses) == 9
     assert set(map(tuple, poses.round(6))) == {(x, y) for x in (0.5, 1.0, 1.5)
-                                              for y in (0.5, 1.0, 1.5)}
+                                               for y in (0.5, 1.0, 1.5)}
     assert len(edges) == 12
     lengths = np.linalg.norm(poses[edges[:, 0]] - poses[edges[:, 1]], axis=1)
     np.testing.assert_allclose(lengths, 0.5)

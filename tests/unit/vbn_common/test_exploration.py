@@ -64,7 +64,7 @@ def test_room_sample_has_200_frames_with_ground_truth_poses(room) -> None:
     assert not room.warnings
     info = room.camera_info
     assert (info.width, info.height, info.distortion_model, info.d) == (1024, 256,
-                                                                         'cylindrical', ())
+                                                                        'cylindrical', ())
     assert info.k[2] == 512.0 and info.k[5] == 128.0 and info.frame_id == 'camera'
     truth = ground_truth(ROOM)
     expected = np.array([truth[f.stamp_ns] for f in room.frames])
@@ -161,8 +161,8 @@ def test_empty_bag(tmp_path: Path) -> None:
 def test_bag_without_images(tmp_path: Path) -> None:
     messages = [m for m in exploration_messages(2) if m[0] != '/camera/image_raw']
     with pytest.raises(VbnCommonError, match=r'has no images: no messages on '
-                                                     r'/camera/image_raw or '
-                                                     r'/camera/image_raw/compressed$'):
+                       r'/camera/image_raw or '
+                       r'/camera/image_raw/compressed$'):
         read_exploration(write_bag(tmp_path / 'b', messages))
 
 
@@ -238,7 +238,7 @@ def test_zero_quaternion_and_all_invalid_poses_is_an_error(tmp_path: Path) -> No
     for p in poses:
         p.pose.orientation.w = 0.0
     with pytest.raises(VbnCommonError, match=r'none of the 2 on /camera/image_raw has a '
-                                                     r'valid pose .*invalid_pose 2'):
+                       r'valid pose .*invalid_pose 2'):
         read_exploration(write_bag(tmp_path / 'b', exploration_messages(2, poses=poses)))
 
 
@@ -258,7 +258,7 @@ def test_tilted_pose_and_changing_camera_info_warn(tmp_path: Path) -> None:
     tilted = pose(T0, 0.0, 0.0, 0.0)
     s = math.sin(0.1 / 2)  # roll 0.1 rad = 5.7 degrees
     tilted.pose.orientation = T['geometry_msgs/msg/Quaternion'](x=s, y=0.0, z=0.0,
-                                                                  w=math.cos(0.05))
+                                                                w=math.cos(0.05))
     assert messages[3][0] == '/ground_truth/pose' and messages[5][0] == '/camera/camera_info'
     messages[3] = ('/ground_truth/pose', POSE, T0, tilted)
     messages[5] = ('/camera/camera_info', INFO, T0 + 10**9, info(T0 + 10**9, fx=5.0))

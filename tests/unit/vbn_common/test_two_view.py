@@ -18,18 +18,18 @@ from vbn_common.geometry import (
     world_points_to_camera,
     wrap_angle,
 )
-from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
-from vbn_common.geometry.two_view import (
-    TwoViewConfig,
-    _planar_sampson,
-    general_essential,
-    linear_combination_of_views,
-    panoramic_planar_motion,
-    pinhole_planar_essential,
+from vbn_common.geometry.epipolar import (
     planar_epipolar_residuals,
+    planar_sampson,
     pointwise_planar_residuals,
-    relative_motion,
 )
+from vbn_common.geometry.essential import general_essential
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
+from vbn_common.geometry.linear_combination import linear_combination_of_views
+from vbn_common.geometry.motion import TwoViewConfig
+from vbn_common.geometry.panoramic_planar import panoramic_planar_motion
+from vbn_common.geometry.pinhole_planar import pinhole_planar_essential
+from vbn_common.geometry.two_view import relative_motion
 
 PANO = make_camera('panoramic')
 PIN = make_camera('pinhole')
@@ -373,8 +373,8 @@ def test_pointwise_residuals_equal_each_motions_own(seed: int) -> None:
     assert rows.shape == (2, 12) and np.allclose(rows[0], each, atol=1e-12)
     assert np.allclose(rows[1], pointwise_planar_residuals(f1, f2, theta[::-1], phi[::-1]))
     # Every motion scored on every correspondence (the robust solvers' form).
-    grid = _planar_sampson(f1 @ BASE_TO_CAMERA_ROTATION.T, f2 @ BASE_TO_CAMERA_ROTATION.T,
-                           theta[:3, None], phi[:3, None])
+    grid = planar_sampson(f1 @ BASE_TO_CAMERA_ROTATION.T, f2 @ BASE_TO_CAMERA_ROTATION.T,
+                          theta[:3, None], phi[:3, None])
     assert grid.shape == (3, 12)
     for k in range(3):
         assert np.allclose(grid[k], planar_epipolar_residuals(f1, f2, theta[k], phi[k]),

@@ -15,7 +15,8 @@ from vbn_common.geometry import (
     wrap_angle,
 )
 from vbn_common.geometry.localize import position_from_two_views, position_from_views
-from vbn_common.geometry.two_view import RelativeMotion, relative_motion
+from vbn_common.geometry.motion import RelativeMotion
+from vbn_common.geometry.two_view import relative_motion
 
 PANO = make_camera('panoramic')
 

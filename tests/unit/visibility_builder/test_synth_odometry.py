@@ -31,7 +31,7 @@ def test_noise_free_odometry_follows_ground_truth(run):
     assert yaw.max() < 1e-6
     # the measured twist is the true body velocity
     assert np.abs(odom.twist[:, 0]).max() == pytest.approx(np.abs(run.velocity[:, 0]).max(),
-                                                          rel=0.05)
+                                                           rel=0.05)
 
 
 def test_odometry_is_seeded(run):

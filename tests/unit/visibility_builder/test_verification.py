@@ -115,7 +115,7 @@ def test_pinhole_images_of_one_pose_have_their_own_headings():
 def test_disabled_and_single_member_classes_pass_unchanged():
     classes = make_classes([[0, 1], [0, -1]], 2)
     keypoints = [np.array([[10.0, 100.0], [500.0, 100.0]]), np.array([[900.0, 20.0],
-                                                                        [3.0, 4.0]])]
+                                                                      [3.0, 4.0]])]
     poses = [np.zeros(3), np.array([0.25, 0.0, 0.0])]
     sizes = [np.full(2, 4.0)] * 2
     off = verify_classes(classes, keypoints, sizes, poses, PANORAMA, VerifyConfig(enabled=False))

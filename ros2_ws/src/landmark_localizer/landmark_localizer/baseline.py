@@ -41,7 +41,8 @@ from vbn_common.features import SiftConfig, extract_features, extract_many
 from vbn_common.geometry.camera import CameraModel, camera_from_info
 from vbn_common.geometry.frames import compose_poses, invert_pose
 from vbn_common.geometry.localize import position_from_views
-from vbn_common.geometry.two_view import RelativeMotion, TwoViewConfig, relative_motion
+from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
+from vbn_common.geometry.two_view import relative_motion
 
 __all__ = ['BaselineConfig', 'FullDatabaseLocalizer', 'FullFeatureDatabase',
            'build_full_database', 'load_full_database']

@@ -19,14 +19,11 @@ import numpy as np
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.epipolar import pointwise_planar_residuals
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 from vbn_common.geometry.localize import PoseEstimate, position_from_views
-from vbn_common.geometry.two_view import (
-    RelativeMotion,
-    TwoViewConfig,
-    pointwise_planar_residuals,
-    relative_motion,
-)
+from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
+from vbn_common.geometry.two_view import relative_motion
 
 __all__ = ['PoseSolution', 'base_pose', 'refine_pose', 'solve_pose']
 
@@ -124,7 +121,7 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     if not estimate.in_front:
         return None
     inliers = np.setdiff1d(np.unique(np.concatenate(kept)), np.fromiter(outliers, np.int64,
-                                                                         len(outliers)))
+                                                                        len(outliers)))
     return PoseSolution(estimate, inliers, len(motions), total, worst)
 
 

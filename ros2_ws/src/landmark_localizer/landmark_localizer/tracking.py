@@ -148,7 +148,7 @@ class Tracker:
             if not keypoints or descriptors is None:
                 continue
             pts = np.array([k.pt for k in keypoints], np.float32) + np.array([x0, y0],
-                                                                            np.float32)
+                                                                             np.float32)
             near = np.linalg.norm(pts - np.array([u, v], np.float32), axis=1) <= radius
             if not near.any():
                 continue

@@ -6,7 +6,7 @@ topic. A pong carrying the same nonce proves that a publisher and a subscriber i
 two processes exchanged messages over the RMW in both directions.
 
 On a full ROS 2 install the echo side also runs as
-``ros2 run visibility_builder dds_probe echo``.
+``ros2 run vbn_common dds_probe echo``.
 """
 from __future__ import annotations
 

@@ -73,7 +73,7 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"  camera:      {camera['kind']} {camera['width']} x {camera['height']}, "
         f"{camera['distortion_model'] or 'no'} distortion, frame {camera['frame_id']}",
         '  frames:      ' + ', '.join(f'{key} = {value}'
-                                       for key, value in sorted(build['frames'].items())),
+                                      for key, value in sorted(build['frames'].items())),
         '  sift:        ' + _pairs(build['sift']),
         '  parameters:  ' + _pairs(build['parameters']),
     ]

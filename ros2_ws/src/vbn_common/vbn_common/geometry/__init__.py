@@ -4,9 +4,12 @@ Core modules (no rclpy, no message types) used by the renderer, the builder, ima
 pose estimation and the localizer: :mod:`.camera` (the panoramic and pinhole camera
 models, their ``CameraInfo`` convention, pixel <-> ray and bearing conversions),
 :mod:`.frames` (frame names, planar poses, yaw <-> quaternion, the optical frame),
-:mod:`.two_view` (relative motion from a model view to the current view, the four
-methods of Chapter 7) and :mod:`.localize` (the current pose from two or more model
-views of known pose).
+:mod:`.transforms` (stamped 3-D transforms, the ``map -> odom`` correction), the
+two-view solvers of Chapter 7, one method per module (:mod:`.panoramic_planar` 7.5.2,
+:mod:`.pinhole_planar` 7.5.1, :mod:`.essential` 7.4, :mod:`.linear_combination` 7.3)
+over :mod:`.epipolar` and one MSAC loop (:mod:`.ransac`), their result
+(:mod:`.motion`), the dispatcher by camera kind (:mod:`.two_view`) and
+:mod:`.localize` (the current pose from two or more model views of known pose).
 The 2-D segment helpers of the scene live one package lower, in
 :mod:`landmark_db.geometry2d`.
 """
@@ -21,6 +24,7 @@ from vbn_common.geometry.camera import (
     camera_from_info,
     make_camera,
 )
+from vbn_common.geometry.essential import general_essential
 from vbn_common.geometry.frames import (
     BASE_FRAME,
     BASE_TO_CAMERA_QUATERNION,
@@ -37,20 +41,16 @@ from vbn_common.geometry.frames import (
     wrap_angle,
     yaw_quaternion,
 )
+from vbn_common.geometry.linear_combination import linear_combination_of_views
 from vbn_common.geometry.localize import (
     PoseEstimate,
     position_from_two_views,
     position_from_views,
 )
-from vbn_common.geometry.two_view import (
-    RelativeMotion,
-    TwoViewConfig,
-    general_essential,
-    linear_combination_of_views,
-    panoramic_planar_motion,
-    pinhole_planar_essential,
-    relative_motion,
-)
+from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
+from vbn_common.geometry.panoramic_planar import panoramic_planar_motion
+from vbn_common.geometry.pinhole_planar import pinhole_planar_essential
+from vbn_common.geometry.two_view import relative_motion
 
 __all__ = [
     'BASE_FRAME',

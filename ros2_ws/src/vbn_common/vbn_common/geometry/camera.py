@@ -313,7 +313,7 @@ class PinholeCamera(CameraModel):
         """
         if not 0.0 < hfov_deg < 180.0:
             raise VbnCommonError(f'pinhole field of view must be in (0, 180) degrees, '
-                                         f'got {hfov_deg}')
+                                 f'got {hfov_deg}')
         f = (width / 2.0) / math.tan(math.radians(hfov_deg) / 2.0)
         return PinholeCamera(width, height, f, f, (width - 1) / 2.0, (height - 1) / 2.0)
 
@@ -410,13 +410,13 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
             f'camera info k and d must be numbers, got k={k_raw!r}, d={d_raw!r}') from None
     if k.size != 9 or not np.all(np.isfinite(k)):
         raise VbnCommonError(f'camera info k must hold 9 finite numbers, '
-                                     f'got {k.tolist()}')
+                             f'got {k.tolist()}')
     if k[1] != 0.0 or k[3] != 0.0 or tuple(k[6:]) != _IDENTITY_K_ROW3:
         raise VbnCommonError(f'camera info k must be [f, 0, c; 0, f, c; 0, 0, 1], '
-                                     f'got {k.tolist()}')
+                             f'got {k.tolist()}')
     if np.any(d != 0.0):
         raise VbnCommonError(f'camera info distortion must be zero (rectified '
-                                     f'images), got d={d.tolist()}')
+                             f'images), got d={d.tolist()}')
     if model == 'cylindrical':
         camera = PanoramicCamera(width, height)
         if not (math.isclose(k[0], camera.f_az, rel_tol=1e-6)
@@ -429,12 +429,12 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
         y0 = None if math.isclose(k[5], camera.horizon_row, rel_tol=1e-12) else float(k[5])
         if f_y is not None and not f_y > 0:
             raise VbnCommonError(f'cylindrical camera info needs f_y = k[4] > 0, '
-                                         f'got {f_y}')
+                                 f'got {f_y}')
         return PanoramicCamera(width, height, f_y=f_y, y0=y0)
     if model == 'plumb_bob':
         return PinholeCamera(width, height, float(k[0]), float(k[4]), float(k[2]), float(k[5]))
     raise VbnCommonError(f'unknown camera info distortion_model {model!r} '
-                                 f'(expected cylindrical or plumb_bob)')
+                         f'(expected cylindrical or plumb_bob)')
 
 
 def _image_size(width: Any, height: Any) -> tuple[int, int]:
@@ -443,7 +443,7 @@ def _image_size(width: Any, height: Any) -> tuple[int, int]:
         size = int(width), int(height)
     except (TypeError, ValueError):
         raise VbnCommonError(f'image size must be integers, '
-                                     f'got {width!r} x {height!r}') from None
+                             f'got {width!r} x {height!r}') from None
     if size != (width, height):
         raise VbnCommonError(f'image size must be integers, got {width!r} x {height!r}')
     return size
@@ -452,6 +452,6 @@ def _image_size(width: Any, height: Any) -> tuple[int, int]:
 def _check_size(width: int, height: int) -> None:
     if not (isinstance(width, int) and isinstance(height, int)) or width < 8 or height < 8:
         raise VbnCommonError(f'image size must be at least 8 x 8 pixels, '
-                                     f'got {width} x {height}')
+                             f'got {width} x {height}')
     if width > 16384 or height > 16384:
         raise VbnCommonError(f'image size {width} x {height} is too large (max 16384)')

@@ -1,9 +1,9 @@
 """The current camera's pose from its motion relative to model views of known pose (7.4).
 
-Each model view ``k`` has a known pose in ``map`` and a :class:`~visibility_builder.
-geometry.two_view.RelativeMotion` to the current view; the current camera lies on the
-ray from the model camera along the motion's direction, which two views fix only up
-to its length. Two rays (the thesis's two model views of a region) meet at the
+Each model view ``k`` has a known pose in ``map`` and a
+:class:`~vbn_common.geometry.motion.RelativeMotion` to the current view; the current
+camera lies on the ray from the model camera along the motion's direction, which two
+views fix only up to its length. Two rays (the thesis's two model views of a region) meet at the
 current position: ``u = v + lambda T_vu = w + mu T_wu`` (Section 7.4, solved here as
 least squares in ``map``). :func:`position_from_views` takes any number of views:
 where the robot stands near the line through two model views their rays are nearly
@@ -39,7 +39,7 @@ import numpy as np
 
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.frames import wrap_angle
-from vbn_common.geometry.two_view import RelativeMotion
+from vbn_common.geometry.motion import RelativeMotion
 
 __all__ = ['PoseEstimate', 'position_from_two_views', 'position_from_views']
 
@@ -115,10 +115,10 @@ def position_from_views(view_poses: np.ndarray, motions: Sequence[RelativeMotion
     poses = np.asarray(view_poses, dtype=float)
     if poses.ndim != 2 or poses.shape[1] != 3 or len(poses) != len(motions):
         raise VbnCommonError(f'view_poses must be (k, 3) with one row per motion, got '
-                                     f'shape {poses.shape} for {len(motions)} motions')
+                             f'shape {poses.shape} for {len(motions)} motions')
     if len(poses) < 2:
         raise VbnCommonError(f'the position needs at least two model views, got '
-                                     f'{len(poses)}')
+                             f'{len(poses)}')
     if not np.all(np.isfinite(poses)):
         raise VbnCommonError('view_poses must be finite')
     local = np.array([m.planar_direction for m in motions])                 # (k, 2)
@@ -193,6 +193,6 @@ def position_from_two_views(view_a_pose: np.ndarray, motion_a: RelativeMotion,
     b = np.asarray(view_b_pose, dtype=float).reshape(-1)
     if a.shape != (3,) or b.shape != (3,):
         raise VbnCommonError(f'model view poses must be (x, y, yaw), got '
-                                     f'{view_a_pose!r} and {view_b_pose!r}')
+                             f'{view_a_pose!r} and {view_b_pose!r}')
     return position_from_views(np.stack([a, b]), [motion_a, motion_b],
                                min_ray_angle=min_ray_angle)

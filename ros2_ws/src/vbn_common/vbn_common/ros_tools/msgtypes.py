@@ -143,7 +143,7 @@ def profile_from_bag_qos(profiles: list[Qos]) -> QoSProfile:
     reliable = all(p.reliability == QosReliability.RELIABLE for p in profiles)
     transient = all(p.durability == QosDurability.TRANSIENT_LOCAL for p in profiles)
     depths = [p.depth for p in profiles if p.history in (QosHistory.KEEP_LAST,
-                                                          QosHistory.KEEP_ALL) and p.depth > 0]
+                                                         QosHistory.KEEP_ALL) and p.depth > 0]
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
         depth=max(depths) if depths else DEFAULT_DEPTH,

@@ -176,7 +176,7 @@ def _camera_frames(spec: BagSpec, scene: Scene) -> Iterator[tuple[int, np.ndarra
     """Yield ``(stamp_ns, base pose)`` of every exploration image."""
     positions = exploration_poses(scene, spec.spacing, spec.clearance)
     headings = [0.0] if spec.camera == 'panoramic' else [0.0, 0.5 * math.pi, math.pi,
-                                                           1.5 * math.pi]
+                                                         1.5 * math.pi]
     for i, (x, y) in enumerate(positions):
         for h, heading in enumerate(headings):
             yaw = math.remainder(heading, 2 * math.pi)

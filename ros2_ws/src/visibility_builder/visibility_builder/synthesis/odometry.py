@@ -96,7 +96,7 @@ def simulate_odometry(trajectory: Trajectory, rate_hz: float = 50.0,
     # Mean true body velocity over each odometry step, from the fine trajectory.
     fine_t = trajectory.times
     cum = np.concatenate([[[0.0, 0.0]], np.cumsum(trajectory.velocity[:-1]
-                                                    * np.diff(fine_t)[:, None], axis=0)])
+                                                  * np.diff(fine_t)[:, None], axis=0)])
     integral = np.stack([np.interp(times, fine_t, cum[:, k]) for k in range(2)], axis=1)
     mean_vel = np.diff(integral, axis=0) / dt  # (n - 1, 2)
     b = noise.wheel_base

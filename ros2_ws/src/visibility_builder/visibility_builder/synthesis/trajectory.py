@@ -137,7 +137,7 @@ def _lattice_graph(scene: Scene, params: RunParameters) -> tuple[np.ndarray, np.
     n = int(ok.sum())
     r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(weights)
     graph = coo_matrix((np.concatenate([w, w]), (np.concatenate([r, c]),
-                                                  np.concatenate([c, r]))), shape=(n, n))
+                                                 np.concatenate([c, r]))), shape=(n, n))
     return points[ok], node_clearance, graph.tocsr()
 
 
