@@ -21,7 +21,7 @@ from landmark_db.database import (
     RegionRecord,
     SampledPoses,
 )
-from landmark_db.database.model import utc_now_iso
+from landmark_db.database.build_info import utc_now_iso
 from vbn_common.geometry.camera import make_camera
 from vbn_common.geometry.frames import world_points_to_camera
 

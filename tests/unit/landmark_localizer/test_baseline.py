@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from landmark_localizer.baseline import (
+from landmark_localizer.bench.baseline import (
     FullDatabaseLocalizer,
     FullFeatureDatabase,
     load_full_database,

@@ -1,7 +1,7 @@
 """vbn bench-localize's table: the room runs carry the targets, floor_run is reported."""
 from __future__ import annotations
 
-from landmark_localizer.cli.bench_localize import report
+from landmark_localizer.bench.report import report
 
 
 def figures(availability: float, median: float, p95: float, tracking_p95: float,

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from landmark_localizer.evaluation import (
+from landmark_localizer.bench.evaluation import (
     Thresholds,
     associate,
     check_run,
@@ -17,7 +17,7 @@ from landmark_localizer.evaluation import (
     pose_accuracy,
     recovery_frames,
 )
-from landmark_localizer.offline import interpolate_poses
+from landmark_localizer.bench.offline import interpolate_poses
 
 MS = 10**6
 

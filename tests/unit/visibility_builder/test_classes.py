@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 
 from visibility_builder import classes as classes_module
+from visibility_builder import pair_matching
 from visibility_builder.classes import (
     ClassConfig,
     correspondence_classes,
-    match_pose_pair,
     pose_pairs_within,
 )
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.pair_matching import match_pose_pair
 
 DIM = 8
 
@@ -258,8 +259,8 @@ def test_uint8_descriptors_give_the_float32_classes_in_one_or_two_processes(monk
 def test_column_argmin_takes_the_first_row_on_ties():
     rng = np.random.default_rng(7)
     d2 = rng.integers(0, 4, (40, 30)).astype(np.float32)   # many ties
-    assert classes_module._argmin_columns(d2).tolist() == d2.argmin(axis=0).tolist()
-    assert classes_module._argmin_columns(d2[:, 5:17]).tolist() == \
+    assert pair_matching._argmin_columns(d2).tolist() == d2.argmin(axis=0).tolist()
+    assert pair_matching._argmin_columns(d2[:, 5:17]).tolist() == \
         d2[:, 5:17].argmin(axis=0).tolist()
 
 

@@ -59,8 +59,23 @@ import numpy as np
 
 from vbn_common.bags import open_bag
 from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.frames import BASE_FRAME, CAMERA_FRAME, MAP_FRAME
 from vbn_common.images import EncodedImage, ImageDecodeError, check_image
+from vbn_common.names import (
+    BASE_FRAME,
+    CAMERA_FRAME,
+    CAMERA_INFO,
+    GROUND_TRUTH_POSE,
+    IMAGE_TOPICS,
+    MAP_FRAME,
+    TF,
+    TF_STATIC,
+)
+from vbn_common.tf_buffer import (
+    TfBuffer,
+    compose_transforms,
+    nearest_stamps,
+    quaternion_matrices,
+)
 
 __all__ = [
     'IMAGE_TOPICS',
@@ -76,7 +91,6 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 #: Image topics tried in this order when ``ReadConfig.image_topic`` is ``None``.
-IMAGE_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed')
 POSE_SOURCES = ('auto', 'ground_truth', 'tf')
 #: Keys of :attr:`Exploration.skipped`.
 SKIP_REASONS = ('bad_image', 'no_pose', 'invalid_pose')
@@ -86,7 +100,7 @@ _INFO_TYPES = ('sensor_msgs/msg/CameraInfo',)
 _POSE_TYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped',
                'nav_msgs/msg/Odometry')
 _TF_TYPES = ('tf2_msgs/msg/TFMessage',)
-_TF, _TF_STATIC = '/tf', '/tf_static'
+_TF, _TF_STATIC = TF, TF_STATIC
 
 
 @dataclass(frozen=True)
@@ -112,8 +126,8 @@ class ReadConfig:
     """
 
     image_topic: str | None = None
-    camera_info_topic: str = '/camera/camera_info'
-    pose_topic: str = '/ground_truth/pose'
+    camera_info_topic: str = CAMERA_INFO
+    pose_topic: str = GROUND_TRUTH_POSE
     pose_source: str = 'auto'
     pose_tolerance_s: float = 0.05
     map_frame: str = MAP_FRAME
@@ -229,119 +243,14 @@ class Exploration:
         return np.array([f.camera_pose for f in self.frames], dtype=float).reshape(-1, 3)
 
 
-# -- rigid transforms, vectorised --------------------------------------------------------
-# geometry.frames holds the planar pose algebra; the tf chain needs full 3-D rotations
-# (the optical camera frame is not a yaw rotation of base_link), stacked per image.
-def _quaternion_matrices(q: np.ndarray) -> np.ndarray:
-    """``(n, 4)`` quaternions ``(x, y, z, w)`` -> ``(n, 3, 3)`` rotations; zero -> NaN."""
-    q = np.asarray(q, dtype=float).reshape(-1, 4)
-    norm = np.linalg.norm(q, axis=1, keepdims=True)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        q = np.where(norm > 1e-12, q / norm, np.nan)
-    x, y, z, w = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=1),
-    ], axis=1)
 
 
-def _compose(outer: tuple[np.ndarray, np.ndarray],
-             inner: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """``outer (+) inner`` for stacks of rigid transforms ``(R (n,3,3), t (n,3))``."""
-    r_out, t_out = outer
-    r_in, t_in = inner
-    return r_out @ r_in, np.einsum('nij,nj->ni', r_out, t_in) + t_out
 
 
-def _nearest(stamps: np.ndarray, queries: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Index into sorted ``stamps`` of the nearest stamp to each query, and the gap (ns)."""
-    right = np.clip(np.searchsorted(stamps, queries), 0, len(stamps) - 1)
-    left = np.clip(right - 1, 0, len(stamps) - 1)
-    gap_left = np.abs(queries - stamps[left])
-    gap_right = np.abs(stamps[right] - queries)
-    index = np.where(gap_right < gap_left, right, left)
-    return index, np.minimum(gap_left, gap_right)
 
 
-@dataclass
-class _Link:
-    """A ``/tf`` link ``parent -> child``: samples over time (static: one, no stamp)."""
-
-    parent: str
-    static: bool
-    stamps: list[int] = field(default_factory=list)
-    translations: list[tuple[float, float, float]] = field(default_factory=list)
-    quaternions: list[tuple[float, float, float, float]] = field(default_factory=list)
 
 
-class _TfBuffer:
-    """The links of ``/tf`` and ``/tf_static``, looked up at many stamps at once."""
-
-    def __init__(self) -> None:
-        self.links: dict[str, _Link] = {}  # by child frame
-        self.conflicts: set[str] = set()
-
-    def add(self, transform: Any, stamp_ns: int, static: bool) -> None:
-        parent = str(transform.header.frame_id).lstrip('/')
-        child = str(transform.child_frame_id).lstrip('/')
-        link = self.links.get(child)
-        if link is None or (static and not link.static):
-            link = self.links[child] = _Link(parent, static)
-        elif link.parent != parent:
-            self.conflicts.add(f'{child} (parents {link.parent} and {parent})')
-            return
-        elif static:  # a newer static transform replaces the older one
-            link.stamps.clear()
-            link.translations.clear()
-            link.quaternions.clear()
-        elif link.static:
-            return
-        t, q = transform.transform.translation, transform.transform.rotation
-        link.stamps.append(stamp_ns)
-        link.translations.append((float(t.x), float(t.y), float(t.z)))
-        link.quaternions.append((float(q.x), float(q.y), float(q.z), float(q.w)))
-
-    def chain(self, parent: str, child: str) -> list[str] | None:
-        """Return the frames from ``child`` up to ``parent`` (both included), or None."""
-        frames = [child]
-        while frames[-1] != parent:
-            link = self.links.get(frames[-1])
-            if link is None or link.parent in frames:
-                return None
-            frames.append(link.parent)
-        return frames
-
-    def lookup(self, parent: str, child: str, stamps: np.ndarray,
-               tolerance_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-        """Return ``(R (n,3,3), t (n,3), found (n,))`` of ``child`` in ``parent``, or None.
-
-        ``found`` is False where a dynamic link has no sample within the tolerance.
-        """
-        frames = self.chain(parent, child)
-        if frames is None:
-            return None
-        n = len(stamps)
-        rotation = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-        translation = np.zeros((n, 3))
-        found = np.ones(n, dtype=bool)
-        for frame in frames[:-1]:
-            link = self.links[frame]
-            if link.static:
-                index = np.zeros(n, dtype=np.intp)
-                link_rotation = _quaternion_matrices(link.quaternions)[index]
-                link_translation = np.asarray(link.translations, dtype=float)[index]
-            else:
-                link_stamps = np.asarray(link.stamps, dtype=np.int64)
-                order = np.argsort(link_stamps, kind='stable')
-                index, gap = _nearest(link_stamps[order], stamps)
-                index = order[index]
-                found &= gap <= tolerance_ns
-                link_rotation = _quaternion_matrices(np.asarray(link.quaternions)[index])
-                link_translation = np.asarray(link.translations, dtype=float)[index]
-            rotation, translation = _compose((link_rotation, link_translation),
-                                             (rotation, translation))
-        return rotation, translation, found
 
 
 def _planar(pose: np.ndarray) -> tuple[float, float, float]:
@@ -459,7 +368,7 @@ class _BagData:
     pose_stamps: list[int] = field(default_factory=list)
     pose_values: list[tuple[float, ...]] = field(default_factory=list)  # x y z qx qy qz qw
     pose_frames: Counter[str] = field(default_factory=Counter)
-    tf: _TfBuffer = field(default_factory=_TfBuffer)
+    tf: TfBuffer = field(default_factory=TfBuffer)
     undecodable: Counter[str] = field(default_factory=Counter)
 
 
@@ -562,7 +471,7 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
     else:
         cam_r, cam_t, cam_found = base_to_camera
         found &= cam_found
-        camera_r, camera_t = _compose((base_r, base_t), (cam_r, cam_t))
+        camera_r, camera_t = compose_transforms((base_r, base_t), (cam_r, cam_t))
         axis = 2 if config.camera_forward_axis == 'z' else 0
 
     base_yaw = np.arctan2(base_r[:, 1, 0], base_r[:, 0, 0])
@@ -627,6 +536,6 @@ def _ground_truth(path: Path, data: _BagData, stamps: np.ndarray, tolerance_ns: 
     pose_stamps = np.asarray(data.pose_stamps, dtype=np.int64)
     values = np.asarray(data.pose_values, dtype=float)
     order = np.argsort(pose_stamps, kind='stable')
-    index, gap = _nearest(pose_stamps[order], stamps)
+    index, gap = nearest_stamps(pose_stamps[order], stamps)
     chosen = values[order[index]]
-    return _quaternion_matrices(chosen[:, 3:]), chosen[:, :3], gap <= tolerance_ns
+    return quaternion_matrices(chosen[:, 3:]), chosen[:, :3], gap <= tolerance_ns

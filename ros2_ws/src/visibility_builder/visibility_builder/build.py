@@ -44,7 +44,7 @@ from landmark_db.database import (
     SampledPoses,
     write_database,
 )
-from landmark_db.database.model import utc_now_iso
+from landmark_db.database.build_info import utc_now_iso
 from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance

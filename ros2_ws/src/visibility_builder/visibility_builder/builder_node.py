@@ -204,7 +204,7 @@ def _make_node() -> Any:
                 self.regions_pub.publish(region_markers(db, stamp=self.get_clock().now()
                                                         .to_msg()))
                 if self.report_dir:
-                    from visibility_builder.cli.build import write_report
+                    from visibility_builder.report import write_report
                     write_report(Path(self.report_dir), result, None)
                 self.get_logger().info(self.result_text)
             except (VisibilityBuilderError, VbnCommonError) as error:

@@ -1,6 +1,7 @@
 """The landmark database: one SQLite file per built world (issue 8, section 2).
 
-:mod:`.model` holds the in-memory database (frozen, validated dataclasses),
+:mod:`.model` holds the in-memory database (frozen, validated dataclasses; the build's
+camera and settings in :mod:`.build_info`, the field checks in :mod:`.fields`),
 :mod:`.schema` the SQLite schema and its version, :mod:`.store` the atomic writer and
 the read-only reader. Typical use::
 
@@ -11,19 +12,21 @@ the read-only reader. Typical use::
 """
 from __future__ import annotations
 
-from landmark_db.database.model import (
+from landmark_db.database.build_info import (
     CAMERA_KINDS,
-    DESCRIPTOR_SIZE,
     POSE_SOURCES,
     BuildInfo,
     CameraIntrinsics,
+    utc_now_iso,
+)
+from landmark_db.database.fields import DESCRIPTOR_SIZE
+from landmark_db.database.model import (
     FeatureClasses,
     LandmarkDatabase,
     ModelView,
     RegionAdjacency,
     RegionRecord,
     SampledPoses,
-    utc_now_iso,
 )
 from landmark_db.database.schema import APPLICATION_ID, SCHEMA_VERSION
 from landmark_db.database.store import (

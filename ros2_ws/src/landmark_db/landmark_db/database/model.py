@@ -14,7 +14,9 @@ feature, the correspondence class of Algorithm 6.3) is entry ``c`` of
 :class:`FeatureClasses`, and is also the feature id of column ``c`` of the exported
 world instance; region ``r`` is ``LandmarkDatabase.regions[r]``.
 
-Every dataclass here is frozen and validates its input in ``__post_init__``: arrays are
+The camera and the build's settings are :mod:`.build_info`'s; the field checks are
+:mod:`.fields`'. Every dataclass here is frozen and validates its input in
+``__post_init__``: arrays are
 copied into the documented dtype and made read-only, so a database cannot change after
 it was checked. The checks are *structural* (shapes, dtypes, finite numbers, indices in
 range, no duplicates, each model view holds every landmark feature of its region);
@@ -29,8 +31,7 @@ kept for the matching symmetry check of Section 6.2.1; and :class:`BuildInfo` ca
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
-from datetime import UTC, datetime, timedelta
+from dataclasses import dataclass
 from functools import cached_property
 import hashlib
 import json
@@ -41,196 +42,36 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from landmark_db.database.build_info import (
+    BuildInfo,
+)
+from landmark_db.database.fields import (
+    ArrayEquality,
+    bool_csr,
+    check_range,
+    descriptor_array,
+    float_array,
+    incidence,
+    int_array,
+    int_at_least,
+    read_only,
+    set_field,
+)
 from landmark_db.decomposition import Decomposition, Region
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance, adjacency_matrix
 
 __all__ = [
-    'CAMERA_KINDS',
-    'DESCRIPTOR_SIZE',
-    'POSE_SOURCES',
-    'BuildInfo',
-    'CameraIntrinsics',
     'FeatureClasses',
     'LandmarkDatabase',
     'ModelView',
     'RegionAdjacency',
     'RegionRecord',
     'SampledPoses',
-    'utc_now_iso',
 ]
 
-DESCRIPTOR_SIZE = 128
-"""Length of a SIFT descriptor; descriptors are stored as uint8 (SIFT's are integers)."""
-
-CAMERA_KINDS = ('panoramic', 'pinhole')
-POSE_SOURCES = ('ground_truth', 'tf', 'estimated')
-
-
-def utc_now_iso() -> str:
-    """Return the current UTC time as ISO 8601 (``2026-12-01T13:22:15+00:00``)."""
-    return datetime.now(UTC).isoformat(timespec='seconds')
-
-
-class _ArrayEquality:
-    """Field-by-field equality that compares arrays and sparse matrices by value."""
-
-    def __eq__(self, other: object) -> bool:
-        if type(other) is not type(self):
-            return NotImplemented
-        return all(_values_equal(getattr(self, f.name), getattr(other, f.name))
-                   for f in fields(self))  # type: ignore[arg-type]
-
-    __hash__ = None  # type: ignore[assignment]
-
-
 @dataclass(frozen=True, eq=False)
-class CameraIntrinsics(_ArrayEquality):
-    """The camera the exploration images were taken with.
-
-    Attributes:
-        kind: ``'panoramic'`` or ``'pinhole'``.
-        width: image width, pixels (> 0).
-        height: image height, pixels (> 0).
-        K: ``(3, 3)`` float64 intrinsic matrix (as in ``sensor_msgs/CameraInfo``).
-        D: ``(n,)`` float64 distortion coefficients (may be empty).
-        distortion_model: name of the distortion model (``'plumb_bob'``, ``'none'``...).
-        frame_id: the camera's optical frame id.
-    """
-
-    kind: str
-    width: int
-    height: int
-    K: np.ndarray
-    D: np.ndarray
-    distortion_model: str
-    frame_id: str
-
-    def __post_init__(self) -> None:
-        if self.kind not in CAMERA_KINDS:
-            raise LandmarkDbError(
-                f'camera kind must be one of {", ".join(CAMERA_KINDS)}, got {self.kind!r}')
-        _set(self, 'width', _positive_int(self.width, 'camera width'))
-        _set(self, 'height', _positive_int(self.height, 'camera height'))
-        _set(self, 'K', _float_array(self.K, 'camera K', (3, 3)))
-        _set(self, 'D', _float_array(self.D, 'camera D', (None,)))
-        _check_str(self.distortion_model, 'camera distortion_model')
-        _check_str(self.frame_id, 'camera frame_id', nonempty=True)
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return a JSON-ready dict (``K`` as nested lists, ``D`` as a list)."""
-        return {'kind': self.kind, 'width': self.width, 'height': self.height,
-                'K': self.K.tolist(), 'D': self.D.tolist(),
-                'distortion_model': self.distortion_model, 'frame_id': self.frame_id}
-
-    @staticmethod
-    def from_dict(data: Any) -> CameraIntrinsics:
-        """Build from :meth:`to_dict`'s structure.
-
-        Raises:
-            LandmarkDbError: on a missing or invalid field.
-        """
-        if not isinstance(data, dict):
-            raise LandmarkDbError('camera must be an object')
-        names = [f.name for f in fields(CameraIntrinsics)]
-        missing = [name for name in names if name not in data]
-        if missing:
-            raise LandmarkDbError(f'camera has no {missing[0]!r}')
-        return CameraIntrinsics(**{name: data[name] for name in names})
-
-
-@dataclass(frozen=True, eq=False)
-class BuildInfo(_ArrayEquality):
-    """How the database was built: every parameter needed to reproduce or judge it.
-
-    Attributes:
-        k: features per landmark (>= 1).
-        rho: overlap radius of the decomposition, graph steps (>= 0).
-        sigma: the decomposition's sigma (>= 0, Section 5.5).
-        algorithm: decomposition algorithm name (``'best'``, ``'B2'``...).
-        pose_source: where the sampled poses came from: ``'ground_truth'``, ``'tf'``
-            or ``'estimated'``.
-        source_bag: the exploration bag (path or name as given to the builder).
-        created_utc: ISO 8601 creation time, UTC (see :func:`utc_now_iso`).
-        camera: the camera model and intrinsics.
-        frames: frame ids, keys ``'map'``, ``'base_link'``, ``'camera'`` (str -> str).
-        sift: SIFT settings (JSON-able dict).
-        parameters: every other build parameter (JSON-able dict).
-        decomposition_seconds: wall-clock time of the decomposition (>= 0); reported
-            by the exported decomposition JSON.
-
-    ``frames``, ``sift`` and ``parameters`` are stored as their JSON round trip (tuples
-    become lists, numpy scalars Python numbers), so a database compares equal to
-    itself after writing and reading.
-    """
-
-    k: int
-    rho: int
-    sigma: int
-    algorithm: str
-    pose_source: str
-    source_bag: str
-    created_utc: str
-    camera: CameraIntrinsics
-    frames: dict[str, str]
-    sift: dict[str, Any]
-    parameters: dict[str, Any]
-    decomposition_seconds: float = 0.0
-
-    def __post_init__(self) -> None:
-        _set(self, 'k', _int_at_least(self.k, 'k', 1))
-        _set(self, 'rho', _int_at_least(self.rho, 'rho', 0))
-        _set(self, 'sigma', _int_at_least(self.sigma, 'sigma', 0))
-        _check_str(self.algorithm, 'algorithm', nonempty=True)
-        if self.pose_source not in POSE_SOURCES:
-            raise LandmarkDbError(f'pose_source must be one of {", ".join(POSE_SOURCES)}, '
-                                  f'got {self.pose_source!r}')
-        _check_str(self.source_bag, 'source_bag')
-        _check_utc(self.created_utc)
-        if not isinstance(self.camera, CameraIntrinsics):
-            raise LandmarkDbError(
-                f'camera must be a CameraIntrinsics, got {type(self.camera).__name__}')
-        frames = _json_dict(self.frames, 'frames')
-        bad = [key for key, value in frames.items() if not isinstance(value, str)]
-        if bad:
-            raise LandmarkDbError(f'frames[{bad[0]!r}] must be a frame id string, '
-                                  f'got {frames[bad[0]]!r}')
-        _set(self, 'frames', frames)
-        _set(self, 'sift', _json_dict(self.sift, 'sift'))
-        _set(self, 'parameters', _json_dict(self.parameters, 'parameters'))
-        seconds = self.decomposition_seconds
-        if (isinstance(seconds, bool) or not isinstance(seconds, (int, float, np.number))
-                or not math.isfinite(seconds) or seconds < 0):
-            raise LandmarkDbError(
-                f'decomposition_seconds must be a non-negative number, got {seconds!r}')
-        _set(self, 'decomposition_seconds', float(seconds))
-
-    def to_dict(self) -> dict[str, Any]:
-        """Return a JSON-ready dict of every field (``camera`` as its own dict)."""
-        values = {f.name: getattr(self, f.name) for f in fields(self)}
-        values['camera'] = self.camera.to_dict()
-        return values
-
-    @staticmethod
-    def from_dict(data: Any) -> BuildInfo:
-        """Build from :meth:`to_dict`'s structure.
-
-        Raises:
-            LandmarkDbError: on a missing or invalid field.
-        """
-        if not isinstance(data, dict):
-            raise LandmarkDbError('build info must be an object')
-        names = [f.name for f in fields(BuildInfo)]
-        missing = [name for name in names if name not in data]
-        if missing:
-            raise LandmarkDbError(f'build parameter {missing[0]!r} is missing')
-        values = {name: data[name] for name in names}
-        values['camera'] = CameraIntrinsics.from_dict(data['camera'])
-        return BuildInfo(**values)
-
-
-@dataclass(frozen=True, eq=False)
-class SampledPoses(_ArrayEquality):
+class SampledPoses(ArrayEquality):
     """The sampled poses V and the pose graph G (Definition 3.1).
 
     Attributes:
@@ -249,27 +90,27 @@ class SampledPoses(_ArrayEquality):
     spacing: float | None = None
 
     def __post_init__(self) -> None:
-        xy = _float_array(self.xy, 'poses xy', (None, 2))
+        xy = float_array(self.xy, 'poses xy', (None, 2))
         n = xy.shape[0]
-        _set(self, 'xy', xy)
-        _set(self, 'yaw', _float_array(self.yaw, 'poses yaw', (n,)))
-        grid = _int_array(self.grid, 'poses grid', (n, 2))
+        set_field(self, 'xy', xy)
+        set_field(self, 'yaw', float_array(self.yaw, 'poses yaw', (n,)))
+        grid = int_array(self.grid, 'poses grid', (n, 2))
         off = grid < 0
         if np.any(grid < -1) or np.any(off[:, 0] != off[:, 1]):
             bad = int(np.flatnonzero((grid < -1).any(axis=1) | (off[:, 0] != off[:, 1]))[0])
             raise LandmarkDbError(f'pose {bad} has grid index {grid[bad].tolist()}; '
                                   f'expected two indices >= 0, or (-1, -1) off the grid')
-        _set(self, 'grid', grid)
-        edges = _int_array(self.edges, 'pose edges', (None, 2))
-        _check_range(edges, n, 'pose edges', 'pose')
-        _set(self, 'edges', edges)
+        set_field(self, 'grid', grid)
+        edges = int_array(self.edges, 'pose edges', (None, 2))
+        check_range(edges, n, 'pose edges', 'pose')
+        set_field(self, 'edges', edges)
         if self.spacing is not None:
             spacing = self.spacing
             if (isinstance(spacing, bool) or not isinstance(spacing, (int, float, np.number))
                     or not math.isfinite(spacing) or spacing <= 0):
                 raise LandmarkDbError(f'pose spacing must be a positive number or None, '
                                       f'got {spacing!r}')
-            _set(self, 'spacing', float(spacing))
+            set_field(self, 'spacing', float(spacing))
 
     @property
     def n_poses(self) -> int:
@@ -278,7 +119,7 @@ class SampledPoses(_ArrayEquality):
 
 
 @dataclass(frozen=True, eq=False)
-class FeatureClasses(_ArrayEquality):
+class FeatureClasses(ArrayEquality):
     """Scene features (correspondence classes, Section 6.2.1) and who sees them.
 
     A feature's appearance changes across the region that sees it, so each class keeps
@@ -298,8 +139,8 @@ class FeatureClasses(_ArrayEquality):
     visibility: sp.csr_matrix
 
     def __post_init__(self) -> None:
-        descriptors = _descriptor_array(self.descriptors, 'class descriptors')
-        offsets = _int_array(self.offsets, 'class offsets', (None,))
+        descriptors = descriptor_array(self.descriptors, 'class descriptors')
+        offsets = int_array(self.offsets, 'class offsets', (None,))
         if offsets.size == 0 or offsets[0] != 0 or offsets[-1] != descriptors.shape[0]:
             raise LandmarkDbError(
                 f'class offsets must run from 0 to the number of descriptors '
@@ -309,14 +150,14 @@ class FeatureClasses(_ArrayEquality):
         if empty.size:
             raise LandmarkDbError(f'class {int(empty[0])} has no descriptor (offsets must '
                                   f'increase strictly)')
-        _set(self, 'descriptors', descriptors)
-        _set(self, 'offsets', offsets)
+        set_field(self, 'descriptors', descriptors)
+        set_field(self, 'offsets', offsets)
         n_classes = offsets.size - 1
-        visibility = _bool_csr(self.visibility, 'class visibility')
+        visibility = bool_csr(self.visibility, 'class visibility')
         if visibility.shape[1] != n_classes:
             raise LandmarkDbError(f'class visibility has {visibility.shape[1]} columns but '
                                   f'there are {n_classes} classes')
-        _set(self, 'visibility', visibility)
+        set_field(self, 'visibility', visibility)
 
     @property
     def n_classes(self) -> int:
@@ -334,7 +175,7 @@ class FeatureClasses(_ArrayEquality):
 
 
 @dataclass(frozen=True, eq=False)
-class ModelView(_ArrayEquality):
+class ModelView(ArrayEquality):
     """One model view of a region: an exploration image and its features (Section 7.2).
 
     Attributes:
@@ -363,10 +204,10 @@ class ModelView(_ArrayEquality):
     descriptors: np.ndarray
 
     def __post_init__(self) -> None:
-        _set(self, 'pose', _int_at_least(self.pose, 'model view pose', 0))
-        _set(self, 'image_stamp_ns', _int_at_least(self.image_stamp_ns,
+        set_field(self, 'pose', int_at_least(self.pose, 'model view pose', 0))
+        set_field(self, 'image_stamp_ns', int_at_least(self.image_stamp_ns,
                                                    'model view image_stamp_ns', 0))
-        _set(self, 'image_index', _int_at_least(self.image_index,
+        set_field(self, 'image_index', int_at_least(self.image_index,
                                                 'model view image_index', 0))
         for name in ('x', 'y', 'yaw'):
             value = getattr(self, name)
@@ -374,8 +215,8 @@ class ModelView(_ArrayEquality):
                     or not math.isfinite(value)):
                 raise LandmarkDbError(f'model view {name} must be a finite number, '
                                       f'got {value!r}')
-            _set(self, name, float(value))
-        class_ids = _int_array(self.class_ids, 'model view class_ids', (None,))
+            set_field(self, name, float(value))
+        class_ids = int_array(self.class_ids, 'model view class_ids', (None,))
         m = class_ids.size
         if np.any(class_ids < -1):
             raise LandmarkDbError(f'model view class id {int(class_ids.min())} is invalid '
@@ -384,21 +225,21 @@ class ModelView(_ArrayEquality):
         if np.unique(known).size != known.size:
             raise LandmarkDbError('model view lists a class twice (eq. 6.3: one image '
                                   'feature per class)')
-        _set(self, 'class_ids', class_ids)
-        keypoints = _float_array(self.keypoints, 'model view keypoints', (m, 2))
-        _set(self, 'keypoints', _readonly(keypoints.astype(np.float32)))
-        descriptors = _descriptor_array(self.descriptors, 'model view descriptors')
+        set_field(self, 'class_ids', class_ids)
+        keypoints = float_array(self.keypoints, 'model view keypoints', (m, 2))
+        set_field(self, 'keypoints', read_only(keypoints.astype(np.float32)))
+        descriptors = descriptor_array(self.descriptors, 'model view descriptors')
         if descriptors.shape[0] != m:
             raise LandmarkDbError(f'model view has {m} class ids but '
                                   f'{descriptors.shape[0]} descriptors')
-        _set(self, 'descriptors', descriptors)
+        set_field(self, 'descriptors', descriptors)
 
     def __len__(self) -> int:
         return int(self.class_ids.size)
 
 
 @dataclass(frozen=True, eq=False)
-class RegionRecord(_ArrayEquality):
+class RegionRecord(ArrayEquality):
     """One region: its poses, its landmark, extra features and model views.
 
     Attributes:
@@ -418,15 +259,15 @@ class RegionRecord(_ArrayEquality):
     model_views: tuple[ModelView, ...]
 
     def __post_init__(self) -> None:
-        raw = _int_array(self.poses, 'region poses', (None,))
+        raw = int_array(self.poses, 'region poses', (None,))
         poses = np.unique(raw)
         if poses.size != raw.size:
             raise LandmarkDbError('region lists a pose twice')
         if poses.size == 0:
             raise LandmarkDbError('region has no poses')
-        _set(self, 'poses', _readonly(poses))
-        landmark = _int_array(self.landmark, 'region landmark', (None,))
-        extra = _int_array(self.extra, 'region extra', (None,))
+        set_field(self, 'poses', read_only(poses))
+        landmark = int_array(self.landmark, 'region landmark', (None,))
+        extra = int_array(self.extra, 'region extra', (None,))
         for name, ids in (('landmark', landmark), ('extra', extra)):
             if np.unique(ids).size != ids.size:
                 raise LandmarkDbError(f'region {name} lists a class twice')
@@ -438,8 +279,8 @@ class RegionRecord(_ArrayEquality):
         if both.size:
             raise LandmarkDbError(f'class {int(both[0])} is both a landmark and an extra '
                                   f'feature of the region')
-        _set(self, 'landmark', landmark)
-        _set(self, 'extra', extra)
+        set_field(self, 'landmark', landmark)
+        set_field(self, 'extra', extra)
         views = tuple(self.model_views)
         if not views:
             raise LandmarkDbError('region has no model view')
@@ -451,7 +292,7 @@ class RegionRecord(_ArrayEquality):
             if absent.size:
                 raise LandmarkDbError(f'model view {i} (image {view.image_index}) lacks '
                                       f'landmark class {int(absent[0])}')
-        _set(self, 'model_views', views)
+        set_field(self, 'model_views', views)
 
     @property
     def features(self) -> np.ndarray:
@@ -460,7 +301,7 @@ class RegionRecord(_ArrayEquality):
 
 
 @dataclass(frozen=True, eq=False)
-class RegionAdjacency(_ArrayEquality):
+class RegionAdjacency(ArrayEquality):
     """The region graph used for switching regions (Section 7.1).
 
     Two regions are neighbours when they share poses (they overlap) or when an edge of
@@ -479,11 +320,11 @@ class RegionAdjacency(_ArrayEquality):
     joining_edges: np.ndarray
 
     def __post_init__(self) -> None:
-        pairs = _int_array(self.pairs, 'adjacency pairs', (None, 2))
+        pairs = int_array(self.pairs, 'adjacency pairs', (None, 2))
         q = pairs.shape[0]
-        _set(self, 'pairs', pairs)
-        _set(self, 'shared_poses', _int_array(self.shared_poses, 'shared_poses', (q,)))
-        _set(self, 'joining_edges', _int_array(self.joining_edges, 'joining_edges', (q,)))
+        set_field(self, 'pairs', pairs)
+        set_field(self, 'shared_poses', int_array(self.shared_poses, 'shared_poses', (q,)))
+        set_field(self, 'joining_edges', int_array(self.joining_edges, 'joining_edges', (q,)))
 
     def neighbours(self, region: int) -> np.ndarray:
         """Return the sorted region ids adjacent to ``region``."""
@@ -492,7 +333,7 @@ class RegionAdjacency(_ArrayEquality):
 
 
 @dataclass(frozen=True, eq=False)
-class LandmarkDatabase(_ArrayEquality):
+class LandmarkDatabase(ArrayEquality):
     """A whole landmark database.
 
     Attributes:
@@ -547,13 +388,13 @@ class LandmarkDatabase(_ArrayEquality):
                     raise LandmarkDbError(
                         f'region {r} model view {i} has class {int(view.class_ids.max())} '
                         f'out of range (there are {c} classes)')
-        _set(self, 'regions', regions)
-        raw = _int_array(self.uncovered, 'uncovered', (None,))
+        set_field(self, 'regions', regions)
+        raw = int_array(self.uncovered, 'uncovered', (None,))
         uncovered = np.unique(raw)
         if uncovered.size != raw.size:
             raise LandmarkDbError('uncovered lists a pose twice')
-        _check_range(uncovered, n, 'uncovered', 'pose')
-        _set(self, 'uncovered', _readonly(uncovered))
+        check_range(uncovered, n, 'uncovered', 'pose')
+        set_field(self, 'uncovered', read_only(uncovered))
 
     @property
     def n_poses(self) -> int:
@@ -573,7 +414,7 @@ class LandmarkDatabase(_ArrayEquality):
     @cached_property
     def region_poses(self) -> sp.csr_matrix:
         """``(n_regions, n_poses)`` bool CSR: which poses each region holds."""
-        return _incidence([r.poses for r in self.regions], self.n_poses)
+        return incidence([r.poses for r in self.regions], self.n_poses)
 
     @cached_property
     def membership(self) -> sp.csr_matrix:
@@ -582,7 +423,7 @@ class LandmarkDatabase(_ArrayEquality):
         A class is a member of a region when it is one of the region's landmark or
         extra features (Sections 3.1.4, 7.1); row ``c`` lists the regions for class c.
         """
-        return _incidence([r.features for r in self.regions], self.n_classes).T.tocsr()
+        return incidence([r.features for r in self.regions], self.n_classes).T.tocsr()
 
     @cached_property
     def adjacency(self) -> RegionAdjacency:
@@ -662,165 +503,3 @@ class LandmarkDatabase(_ArrayEquality):
         info = self.info
         return Decomposition(info.algorithm, info.k, info.rho, info.sigma,
                              info.decomposition_seconds, regions, self.uncovered.copy())
-
-
-# --- validation helpers -------------------------------------------------------------
-
-
-def _set(obj: object, name: str, value: Any) -> None:
-    object.__setattr__(obj, name, value)
-
-
-def _readonly(array: np.ndarray) -> np.ndarray:
-    array.setflags(write=False)
-    return array
-
-
-def _values_equal(a: Any, b: Any) -> bool:
-    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
-        return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
-                and a.dtype == b.dtype and a.shape == b.shape and bool(np.array_equal(a, b)))
-    if sp.issparse(a) or sp.issparse(b):
-        return (sp.issparse(a) and sp.issparse(b) and a.shape == b.shape
-                and (a != b).nnz == 0)
-    if isinstance(a, tuple) and isinstance(b, tuple):
-        return len(a) == len(b) and all(_values_equal(x, y) for x, y in zip(a, b))
-    return bool(a == b)
-
-
-def _check_str(value: Any, name: str, nonempty: bool = False) -> None:
-    if not isinstance(value, str) or (nonempty and not value):
-        raise LandmarkDbError(f'{name} must be a {"non-empty " if nonempty else ""}string, '
-                              f'got {value!r}')
-
-
-def _int_at_least(value: Any, name: str, least: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-        raise LandmarkDbError(f'{name} must be an integer >= {least}, got {value!r}')
-    return int(value)
-
-
-def _positive_int(value: Any, name: str) -> int:
-    return _int_at_least(value, name, 1)
-
-
-def _check_utc(value: Any) -> None:
-    _check_str(value, 'created_utc', nonempty=True)
-    try:
-        moment = datetime.fromisoformat(value)
-    except ValueError:
-        raise LandmarkDbError(f'created_utc must be an ISO 8601 time, got {value!r}') from None
-    if moment.tzinfo is not None and moment.utcoffset() != timedelta(0):
-        raise LandmarkDbError(f'created_utc must be in UTC, got {value!r}')
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f'{type(value).__name__} is not JSON-serialisable')
-
-
-def _json_dict(value: Any, name: str) -> dict[str, Any]:
-    if not isinstance(value, dict):
-        raise LandmarkDbError(f'{name} must be a dict, got {type(value).__name__}')
-    try:
-        text = json.dumps(value, default=_json_default, allow_nan=False, sort_keys=True)
-    except (TypeError, ValueError) as error:
-        raise LandmarkDbError(f'{name} must be JSON-serialisable: {error}') from None
-    return json.loads(text)
-
-
-def _shape_ok(shape: tuple[int, ...], expected: tuple[int | None, ...]) -> bool:
-    return len(shape) == len(expected) and all(
-        want is None or got == want for got, want in zip(shape, expected))
-
-
-def _shape_text(expected: tuple[int | None, ...]) -> str:
-    return '(' + ', '.join('n' if s is None else str(s) for s in expected) + \
-        (',)' if len(expected) == 1 else ')')
-
-
-def _numeric(value: Any, name: str) -> np.ndarray:
-    try:
-        array = np.asarray(value)
-    except (TypeError, ValueError):
-        raise LandmarkDbError(f'{name} must be a numeric array') from None
-    if array.size and (array.dtype == bool or array.dtype.kind not in 'iuf'):
-        raise LandmarkDbError(f'{name} must be a numeric array, got dtype {array.dtype}')
-    return array
-
-
-def _float_array(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
-    array = _numeric(value, name)
-    if array.size == 0:
-        array = array.reshape([0 if s is None else s for s in shape])
-    if not _shape_ok(array.shape, shape):
-        raise LandmarkDbError(f'{name} must have shape {_shape_text(shape)}, '
-                              f'got {array.shape}')
-    array = np.array(array, dtype=np.float64)
-    if not np.all(np.isfinite(array)):
-        raise LandmarkDbError(f'{name} holds a non-finite number')
-    return _readonly(array)
-
-
-def _int_array(value: Any, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
-    array = _numeric(value, name)
-    if array.size == 0:
-        array = np.zeros([0 if s is None else s for s in shape], dtype=np.int64)
-    if not _shape_ok(array.shape, shape):
-        raise LandmarkDbError(f'{name} must have shape {_shape_text(shape)}, '
-                              f'got {array.shape}')
-    if array.dtype.kind == 'f':
-        raise LandmarkDbError(f'{name} must hold integers, got dtype {array.dtype}')
-    if array.dtype.kind == 'u' and array.size and array.max() > np.iinfo(np.int64).max:
-        raise LandmarkDbError(f'{name} holds an integer beyond int64')
-    return _readonly(np.array(array, dtype=np.int64))
-
-
-def _descriptor_array(value: Any, name: str) -> np.ndarray:
-    array = _numeric(value, name)
-    if array.size == 0:
-        array = np.zeros((0, DESCRIPTOR_SIZE), dtype=np.uint8)
-    if array.ndim != 2 or array.shape[1] != DESCRIPTOR_SIZE:
-        raise LandmarkDbError(f'{name} must have shape (n, {DESCRIPTOR_SIZE}), '
-                              f'got {array.shape}')
-    if array.dtype != np.uint8:
-        if not (np.all(np.isfinite(array)) and np.all(array == np.round(array))
-                and array.min(initial=0) >= 0 and array.max(initial=0) <= 255):
-            raise LandmarkDbError(f'{name} must hold integers 0..255 (SIFT descriptors), '
-                                  f'got values outside that')
-    return _readonly(np.array(array, dtype=np.uint8))
-
-
-def _bool_csr(value: Any, name: str) -> sp.csr_matrix:
-    if sp.issparse(value):
-        matrix = sp.csr_matrix(value, dtype=bool, copy=True)
-    else:
-        dense = np.asarray(value)
-        if dense.ndim != 2:
-            raise LandmarkDbError(f'{name} must be a 2-D matrix, got shape {dense.shape}')
-        matrix = sp.csr_matrix(dense.astype(bool))
-    matrix.sum_duplicates()
-    matrix.eliminate_zeros()
-    matrix.sort_indices()
-    return matrix
-
-
-def _check_range(array: np.ndarray, n: int, name: str, what: str) -> None:
-    if array.size and (array.min() < 0 or array.max() >= n):
-        bad = int(array[(array < 0) | (array >= n)][0])
-        raise LandmarkDbError(f'{name}: {what} index {bad} out of range (there are {n})')
-
-
-def _incidence(rows: list[np.ndarray], n_columns: int) -> sp.csr_matrix:
-    """``(len(rows), n_columns)`` bool CSR with row ``i`` set at ``rows[i]``."""
-    lengths = np.array([row.size for row in rows], dtype=np.int64)
-    indptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-    indices = np.concatenate(rows).astype(np.int64) if rows else np.zeros(0, np.int64)
-    matrix = sp.csr_matrix((np.ones(indices.size, dtype=bool), indices, indptr),
-                           shape=(len(rows), n_columns))
-    matrix.sum_duplicates()
-    matrix.sort_indices()
-    return matrix

@@ -36,9 +36,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from landmark_db.atomic import atomic_output
+from landmark_db.database.build_info import BuildInfo
+from landmark_db.database.fields import DESCRIPTOR_SIZE
 from landmark_db.database.model import (
-    DESCRIPTOR_SIZE,
-    BuildInfo,
     FeatureClasses,
     LandmarkDatabase,
     ModelView,

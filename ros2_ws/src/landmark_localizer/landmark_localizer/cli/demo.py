@@ -16,7 +16,7 @@ Steps, each a subprocess as a user would run it:
    odometry and ground truth) to the node in real time.
 
 Then the recording is evaluated by the same code as ``vbn localize``
-(:mod:`landmark_localizer.evaluation`): accuracy by ``evo_ape`` (and ours beside it),
+(:mod:`landmark_localizer.bench.evaluation`): accuracy by ``evo_ape`` (and ours beside it),
 availability (poses over the images played), region changes by prediction and after a
 loss and the per-frame latency (the node's ``/diagnostics``); ``OUT/trajectory.png``
 shows the estimated and true trajectories over the regions. The last line is
@@ -30,7 +30,6 @@ localhost discovery, so it neither hears nor disturbs other ROS programs.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 from pathlib import Path
 import random
@@ -41,15 +40,18 @@ import sys
 import time
 from typing import Any
 
+from vbn_common import names
+
 __all__ = ['register', 'run']
 
 #: Builder settings of the demo's database beyond the builder's defaults (none: the
 #: defaults cover the room; ``--build-set`` adds some).
 DEMO_BUILD_SETTINGS: tuple[str, ...] = ()
-RECORDED_TOPICS = ('/localizer/pose', '/localizer/pose_with_covariance', '/localizer/region',
-                   '/ground_truth/pose', '/diagnostics')
-PLAYED_TOPICS = ('/camera/image_raw', '/camera/image_raw/compressed', '/camera/camera_info',
-                 '/odom', '/ground_truth/pose')
+#: What the demo records of the node (and the ground truth that the player publishes).
+RECORDED_TOPICS = (names.LOCALIZER_POSE, names.LOCALIZER_POSE_WITH_COVARIANCE,
+                   names.LOCALIZER_REGION, names.GROUND_TRUTH_POSE, names.DIAGNOSTICS)
+#: What the demo plays of the run bag (those the bag has).
+PLAYED_TOPICS = (*names.IMAGE_TOPICS, names.CAMERA_INFO, names.ODOM, names.GROUND_TRUTH_POSE)
 
 
 def register(subparsers: Any) -> None:
@@ -194,6 +196,8 @@ def run(args: argparse.Namespace) -> int:
         for process in reversed(processes):
             process.stop()
     _step('5/5 evaluate the recording')
+    from landmark_localizer.bench.demo import evaluate_demo
+
     passed = evaluate_demo(out, recorded, db, Path(args.run), args.scene)
     print(f'(demo took {time.perf_counter() - start:.0f} s)')
     print('PASS' if passed else 'FAIL', flush=True)
@@ -210,95 +214,3 @@ def _played_topics(run_bag: Path) -> list[str]:
             return [t for t in PLAYED_TOPICS if t in bag.topics]
     except VbnCommonError as error:
         raise LocalizerError(str(error)) from None
-
-
-def evaluate_demo(out: Path, recorded: Path, db: Path, run_bag: Path, scene: str) -> bool:
-    """Evaluate a recording of the node; print the table; write the PNG and JSON.
-
-    Args:
-        out: Output folder (``trajectory.png``, ``results.json``).
-        recorded: The recorded bag.
-        db: The database localized against.
-        run_bag: The bag played (its images are the frames).
-        scene: Scene name or file drawn under the trajectories ('' for none).
-
-    Returns:
-        Whether every target is met.
-    """
-    from dataclasses import replace
-    import math
-
-    import numpy as np
-
-    from landmark_db.database import open_database
-    from landmark_localizer.evaluation import (
-        Latency,
-        RegionChanges,
-        associate,
-        check_run,
-        count_region_changes,
-        evaluate_run,
-        evo_ape,
-        format_checks,
-        format_evaluation,
-    )
-    from landmark_localizer.plots import save_trajectory_figure
-    from landmark_localizer.pose_bags import read_pose_bag, read_run_bag
-
-    bag = read_pose_bag(recorded)
-    played = read_run_bag(run_bag)
-    frames = np.sort(played.stamps_ns)
-    frame_poses = np.full((len(frames), 3), np.nan)
-    rows, pose_rows = associate(frames, bag.pose_stamps_ns, 0.001)
-    frame_poses[rows] = bag.poses[pose_rows]
-    truth_stamps = bag.truth_stamps_ns if len(bag.truth_stamps_ns) else played.truth_stamps_ns
-    truth_poses = bag.truth_poses if len(bag.truth_stamps_ns) else played.truth_poses
-    regions = np.where(np.isfinite(frame_poses).all(axis=1), 0, -1)
-    evaluation = evaluate_run(frames, regions, frame_poses, truth_stamps, truth_poses)
-    from_topic = count_region_changes(bag.regions)
-    diag = bag.diagnostics[-1] if bag.diagnostics else {}
-
-    def number(key: str) -> float:
-        try:
-            return float(diag[key])
-        except (KeyError, ValueError):
-            return math.nan
-
-    changes = from_topic
-    if diag:
-        changes = RegionChanges(int(number('predicted_switches')),
-                                int(number('switches_after_loss')))
-        ms = 1e-3
-        latency = Latency(number('latency_p50_ms') * ms, number('latency_p95_ms') * ms,
-                          math.nan, math.nan, math.nan, math.nan, 0, 0)
-        evaluation = replace(evaluation, latency=latency,
-                             falls_to_lost=int(number('falls_to_lost')))
-    evaluation = replace(evaluation, changes=changes, evo=evo_ape(recorded)
-                         if len(bag.poses) and len(bag.truth_stamps_ns) else None)
-    print(format_evaluation(evaluation, f'{run_bag} through the localizer node over DDS '
-                                        f'({len(frames)} images played):'))
-    print(f'  /localizer/region {len(bag.regions)} messages; changes seen there: '
-          f'{from_topic.predicted} direct, {from_topic.after_loss} after LOST')
-    if diag:
-        print(f'  node diagnostics  frames received {diag.get("frames_received")}, processed '
-              f'{diag.get("frames_processed")}, dropped {diag.get("frames_dropped")}; '
-              f'latency over the last {min(200, int(number("frames_processed") or 0))} '
-              f'frames p50 {number("latency_p50_ms"):.1f} ms, p95 '
-              f'{number("latency_p95_ms"):.1f} ms, max {number("latency_max_ms"):.1f} ms')
-    scene_obj = None
-    if scene:
-        from landmark_db.scenes import resolve_scene
-        scene_obj = resolve_scene(scene)
-    png = save_trajectory_figure(out / 'trajectory.png', open_database(db), truth_stamps,
-                                 truth_poses, bag.pose_stamps_ns, bag.poses, frames, scene_obj,
-                                 title=f'{run_bag.name}: localizer node (dots) and ground truth '
-                                       f'(line) over the regions of {db.name}')
-    print(f'  figure            {png}')
-    checks = check_run(evaluation)
-    print(format_checks(checks, "against the issue's targets for room_run:"))
-    results = evaluation.as_dict()
-    results['diagnostics'] = diag
-    results['checks'] = [{'name': c.name, 'value': c.value, 'limit': c.limit,
-                          'passed': c.passed} for c in checks]
-    (out / 'results.json').write_text(json.dumps(results, indent=1, default=str))
-    return all(c.passed for c in checks)

@@ -52,7 +52,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--baseline', metavar='EXPLORATION_BAGDIR', default=None,
                         help='localize with the baseline instead: every frame matched '
                              'against every SIFT feature of this exploration bag '
-                             '(landmark_localizer.baseline; --db gives the SIFT settings)')
+                             '(landmark_localizer.bench.baseline; --db gives the SIFT settings)')
     parser.add_argument('--baseline-cache', metavar='FILE.npz', default=None,
                         help="keep the baseline's full feature database in this file")
     parser.add_argument('--no-evo', action='store_true', help='skip the check by evo_ape')
@@ -103,12 +103,12 @@ def run(args: argparse.Namespace) -> int:
             os.environ.setdefault(name, '1')
     from landmark_db.cli.assignments import parse_assignments
     from landmark_db.database import open_database
+    from landmark_localizer.bench.evaluation import evo_ape, format_evaluation
+    from landmark_localizer.bench.offline import coverage_split, evaluate_offline, localize_run
+    from landmark_localizer.bench.pose_bags import read_run_bag, write_pose_bag
     from landmark_localizer.config import LocalizerConfig
     from landmark_localizer.errors import LocalizerError
-    from landmark_localizer.evaluation import evo_ape, format_evaluation
     from landmark_localizer.localizer import Localizer
-    from landmark_localizer.offline import coverage_split, evaluate_offline, localize_run
-    from landmark_localizer.pose_bags import read_run_bag, write_pose_bag
 
     out = Path(args.out)
     if out.exists() and not args.overwrite:
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     config = LocalizerConfig().with_values(parse_assignments(args.settings))
     database = open_database(args.db)
     if args.baseline:
-        from landmark_localizer.baseline import FullDatabaseLocalizer, build_full_database
+        from landmark_localizer.bench.baseline import FullDatabaseLocalizer, build_full_database
         from vbn_common.features import SiftConfig
 
         sift = SiftConfig(**{k: v for k, v in database.info.sift.items()

@@ -22,6 +22,8 @@ import math
 
 import numpy as np
 
+from vbn_common.names import BASE_FRAME, CAMERA_FRAME, MAP_FRAME, ODOM_FRAME
+
 __all__ = [
     'BASE_FRAME',
     'BASE_TO_CAMERA_QUATERNION',
@@ -38,15 +40,6 @@ __all__ = [
     'world_points_to_camera',
     'yaw_quaternion',
 ]
-
-#: REP 105 world-fixed frame (the localizer's and the ground truth's frame).
-MAP_FRAME = 'map'
-#: REP 105 odometry frame (continuous, drifting).
-ODOM_FRAME = 'odom'
-#: REP 105 robot body frame (REP 103 axes: x forward, y left, z up).
-BASE_FRAME = 'base_link'
-#: The camera's optical frame (z forward, x right, y down), the image headers' frame.
-CAMERA_FRAME = 'camera'
 
 #: Columns are the optical axes expressed in ``base_link``: x_opt = -y_base,
 #: y_opt = -z_base, z_opt = x_base. ``p_base = R @ p_camera``.

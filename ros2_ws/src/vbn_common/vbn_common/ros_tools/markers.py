@@ -14,6 +14,8 @@ from typing import Any
 import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from vbn_common.names import MAP_FRAME
+
 __all__ = ['LATCHED_QOS', 'region_markers']
 
 #: Transient-local, reliable, depth 1: what RViz needs to get markers published earlier.
@@ -22,7 +24,7 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def region_markers(database: Any, frame_id: str = 'map', stamp: Any = None) -> Any:
+def region_markers(database: Any, frame_id: str = MAP_FRAME, stamp: Any = None) -> Any:
     """Return the ``MarkerArray`` of a :class:`~landmark_db.database.LandmarkDatabase`."""
     from geometry_msgs.msg import Point
     from std_msgs.msg import ColorRGBA

@@ -22,6 +22,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from vbn_common.geometry.transforms import StampedTransform
+from vbn_common.names import TF, TF_STATIC
 
 __all__ = ['DYNAMIC_QOS', 'STATIC_QOS', 'TransformBroadcaster', 'to_message']
 
@@ -65,7 +66,7 @@ class TransformBroadcaster:
         self._message_class = TFMessage
         self.static = static
         self.publisher = node.create_publisher(
-            TFMessage, '/tf_static' if static else '/tf', STATIC_QOS if static else DYNAMIC_QOS)
+            TFMessage, TF_STATIC if static else TF, STATIC_QOS if static else DYNAMIC_QOS)
         self._static_frames: dict[str, Any] = {}
 
     def send(self, transforms: StampedTransform | Iterable[StampedTransform]) -> None:

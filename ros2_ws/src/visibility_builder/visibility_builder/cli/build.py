@@ -12,7 +12,6 @@ filters, the thesis's Figure 8.7) and ``summary.json`` (every count and time).
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 import sys
 from typing import Any
@@ -107,6 +106,8 @@ def run(args: argparse.Namespace) -> int:
           f'classes, {db.poses.n_poses} poses, {Path(args.db).stat().st_size / 1e6:.2f} MB '
           f'in {total:.1f} s')
     if args.report:
+        from visibility_builder.report import write_report
+
         write_report(Path(args.report), result, args.scene)
         print(f'report in {args.report}')
     return 0
@@ -118,49 +119,3 @@ def _short(value: Any) -> str:
     if isinstance(value, dict):
         return '{' + ', '.join(f'{k}: {v}' for k, v in value.items()) + '}'
     return str(value)
-
-
-def write_report(folder: Path, result: Any, scene_name: str | None) -> None:
-    """Write the figures and ``summary.json`` of a build into ``folder``."""
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from landmark_db.atomic import write_text_atomic
-    from landmark_db.plotting import save_decomposition_figure
-
-    folder.mkdir(exist_ok=True)
-    scene = None
-    if scene_name:
-        from landmark_db.scenes import resolve_scene
-        scene = resolve_scene(scene_name)
-    db = result.database
-    save_decomposition_figure(
-        folder / 'regions.png', result.world, [r.poses for r in db.regions], db.info.k,
-        db.uncovered, scene=scene,
-        title=f'{len(db.regions)} regions, {db.info.algorithm}, k={db.info.k}, '
-              f'rho={db.info.rho}, sigma={db.info.sigma}')
-    report = result.report
-    fig, ax = plt.subplots(figsize=(7, 4))
-    before, after = report.visibility_sizes_before, report.visibility_sizes_after
-    top = int(max(before.max(initial=1), after.max(initial=1)))
-    bins = np.arange(1, top + 2) - 0.5 if top <= 60 else 40
-    ax.hist(before[before > 0], bins=bins, alpha=0.5, label=f'after Algorithm 6.3 '
-            f'({int((before > 1).sum())} classes seen from 2+ poses)')
-    ax.hist(after, bins=bins, alpha=0.6, label=f'after the filters ({after.size} classes, '
-            f'median {np.median(after) if after.size else 0:.0f} poses)')
-    ax.set_xlabel('poses a feature class is seen from')
-    ax.set_ylabel('classes')
-    ax.set_yscale('log')
-    ax.legend()
-    ax.set_title('Feature visibility regions by size (thesis Figure 8.7)')
-    fig.tight_layout()
-    fig.savefig(folder / 'visibility_sizes.png', dpi=110)
-    plt.close(fig)
-    summary = report.summary()
-    summary['database'] = {'regions': len(db.regions), 'classes': db.classes.n_classes,
-                           'poses': db.poses.n_poses, 'k': db.info.k, 'rho': db.info.rho,
-                           'sigma': db.info.sigma, 'algorithm': db.info.algorithm,
-                           'pose_source': db.info.pose_source}
-    write_text_atomic(folder / 'summary.json', json.dumps(summary, indent=2, default=str))

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from landmark_db.scene import Scene
+from vbn_common import names
 from vbn_common.bags import BagWriter, default_qos
 from vbn_common.geometry.camera import make_camera
 from vbn_common.geometry.frames import compose_poses, invert_pose
@@ -153,17 +154,17 @@ class _Bag:
     def __init__(self, writer: BagWriter, compressed: bool, run: bool) -> None:
         self.writer = writer
         self.counts: dict[str, int] = {}
-        self.image_topic = '/camera/image_raw/compressed' if compressed else '/camera/image_raw'
+        self.image_topic = names.IMAGE_COMPRESSED if compressed else names.IMAGE_RAW
         image_type = 'sensor_msgs/msg/CompressedImage' if compressed else 'sensor_msgs/msg/Image'
         reliable = [default_qos()]
         topics = [(self.image_topic, image_type, reliable),
-                  ('/camera/camera_info', 'sensor_msgs/msg/CameraInfo', reliable),
-                  ('/ground_truth/pose', 'geometry_msgs/msg/PoseStamped', reliable),
-                  ('/tf', 'tf2_msgs/msg/TFMessage', [default_qos(depth=100)]),
-                  ('/tf_static', 'tf2_msgs/msg/TFMessage',
+                  (names.CAMERA_INFO, 'sensor_msgs/msg/CameraInfo', reliable),
+                  (names.GROUND_TRUTH_POSE, 'geometry_msgs/msg/PoseStamped', reliable),
+                  (names.TF, 'tf2_msgs/msg/TFMessage', [default_qos(depth=100)]),
+                  (names.TF_STATIC, 'tf2_msgs/msg/TFMessage',
                    [default_qos(durability='transient_local', depth=1)])]
         if run:
-            topics.append(('/odom', 'nav_msgs/msg/Odometry', [default_qos(depth=50)]))
+            topics.append((names.ODOM, 'nav_msgs/msg/Odometry', [default_qos(depth=50)]))
         self.connections = {topic: writer.add_topic(topic, msgtype, qos)
                             for topic, msgtype, qos in topics}
 
@@ -218,7 +219,7 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     info = camera.camera_info()
     with BagWriter(out) as writer:
         bag = _Bag(writer, spec.compression is not None, trajectory is not None)
-        bag.write('/tf_static', START_NS, messages.tf_message(
+        bag.write(names.TF_STATIC, START_NS, messages.tf_message(
             [messages.camera_static_transform(START_NS, scene.camera_height)]))
 
         def write_image(index: int, stamp: int, pose: np.ndarray) -> None:
@@ -231,14 +232,14 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
                 message = messages.compressed_image_message(stamp, image, spec.compression,
                                                             spec.jpeg_quality)
             bag.write(bag.image_topic, stamp, message)
-            bag.write('/camera/camera_info', stamp, messages.camera_info_message(stamp, info))
-            bag.write('/ground_truth/pose', stamp, messages.pose_stamped_message(stamp, pose))
+            bag.write(names.CAMERA_INFO, stamp, messages.camera_info_message(stamp, info))
+            bag.write(names.GROUND_TRUTH_POSE, stamp, messages.pose_stamped_message(stamp, pose))
 
         if trajectory is None:
             for index, (stamp, pose) in enumerate(frames):
                 write_image(index, stamp, pose)
-                bag.write('/tf', stamp, messages.tf_message(
-                    [messages.planar_transform(stamp, 'map', 'base_link', pose)]))
+                bag.write(names.TF, stamp, messages.tf_message(
+                    [messages.planar_transform(stamp, names.MAP_FRAME, names.BASE_FRAME, pose)]))
                 if progress:
                     progress(index + 1, len(frames))
             images = len(frames)
@@ -264,18 +265,20 @@ def _write_run(bag: _Bag, trajectory: Trajectory, spec: BagSpec,
     ground_truth = trajectory.pose_at(np.arange(n_images) * IMAGE_PERIOD_NS / 1e9)
     for k in range(n_odom):  # time order: odometry, then the image at the same stamp
         stamp = START_NS + k * ODOM_PERIOD_NS
-        bag.write('/odom', stamp, messages.odometry_message(
+        bag.write(names.ODOM, stamp, messages.odometry_message(
             stamp, odom.poses[k], odom.twist[k], odom.pose_variance[k], odom.twist_variance))
-        transforms = [messages.planar_transform(stamp, 'odom', 'base_link', odom.poses[k])]
+        transforms = [messages.planar_transform(stamp, names.ODOM_FRAME, names.BASE_FRAME,
+                                                odom.poses[k])]
         if k % per_image == 0:
             i = k // per_image
             # map -> odom such that map -> odom -> base_link is the ground truth now.
             map_to_odom = compose_poses(ground_truth[i], invert_pose(odom.poses[k]))
-            transforms.insert(0, messages.planar_transform(stamp, 'map', 'odom', map_to_odom))
-            bag.write('/tf', stamp, messages.tf_message(transforms))
+            transforms.insert(0, messages.planar_transform(stamp, names.MAP_FRAME,
+                                                           names.ODOM_FRAME, map_to_odom))
+            bag.write(names.TF, stamp, messages.tf_message(transforms))
             write_image(i, stamp, ground_truth[i])
             if progress:
                 progress(i + 1, n_images)
         else:
-            bag.write('/tf', stamp, messages.tf_message(transforms))
+            bag.write(names.TF, stamp, messages.tf_message(transforms))
     return n_images

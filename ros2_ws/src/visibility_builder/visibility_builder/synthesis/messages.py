@@ -15,6 +15,7 @@ import numpy as np
 from vbn_common.bags import TYPESTORE
 from vbn_common.geometry.camera import CameraInfoFields
 from vbn_common.geometry.frames import BASE_TO_CAMERA_QUATERNION, yaw_quaternion
+from vbn_common.names import BASE_FRAME, CAMERA_FRAME, MAP_FRAME, ODOM_FRAME
 from visibility_builder.errors import VisibilityBuilderError
 
 __all__ = [
@@ -41,7 +42,7 @@ def header(stamp_ns: int, frame_id: str) -> Any:
         stamp=_T['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec), frame_id=frame_id)
 
 
-def image_message(stamp_ns: int, image: np.ndarray, frame_id: str = 'camera') -> Any:
+def image_message(stamp_ns: int, image: np.ndarray, frame_id: str = CAMERA_FRAME) -> Any:
     """Return a ``sensor_msgs/Image`` (``mono8`` for 2-D, ``bgr8`` for 3-channel arrays)."""
     image = np.ascontiguousarray(image, dtype=np.uint8)
     encoding = 'mono8' if image.ndim == 2 else 'bgr8'
@@ -70,7 +71,7 @@ def encode_image(image: np.ndarray, fmt: str, jpeg_quality: int = 90) -> bytes:
 
 
 def compressed_image_message(stamp_ns: int, image: np.ndarray, fmt: str = 'jpeg',
-                             jpeg_quality: int = 90, frame_id: str = 'camera') -> Any:
+                             jpeg_quality: int = 90, frame_id: str = CAMERA_FRAME) -> Any:
     """Return a ``sensor_msgs/CompressedImage``.
 
     The ``format`` field follows image_transport's compressed plugin:
@@ -84,7 +85,7 @@ def compressed_image_message(stamp_ns: int, image: np.ndarray, fmt: str = 'jpeg'
 
 
 def camera_info_message(stamp_ns: int, info: CameraInfoFields,
-                        frame_id: str = 'camera') -> Any:
+                        frame_id: str = CAMERA_FRAME) -> Any:
     """Return a ``sensor_msgs/CameraInfo`` from :class:`CameraInfoFields`."""
     roi = _T['sensor_msgs/msg/RegionOfInterest'](x_offset=0, y_offset=0, height=0, width=0,
                                                  do_rectify=False)
@@ -102,7 +103,7 @@ def _pose(x: float, y: float, z: float, quaternion: tuple[float, ...] | np.ndarr
         orientation=_T['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2], w=q[3]))
 
 
-def pose_stamped_message(stamp_ns: int, pose: np.ndarray, frame_id: str = 'map') -> Any:
+def pose_stamped_message(stamp_ns: int, pose: np.ndarray, frame_id: str = MAP_FRAME) -> Any:
     """Return a ``geometry_msgs/PoseStamped`` for a planar pose ``(x, y, yaw)``."""
     x, y, yaw = (float(v) for v in pose)
     return _T['geometry_msgs/msg/PoseStamped'](header=header(stamp_ns, frame_id),
@@ -129,7 +130,7 @@ def planar_transform(stamp_ns: int, parent: str, child: str, pose: np.ndarray) -
 
 def camera_static_transform(stamp_ns: int, camera_height: float) -> Any:
     """Return ``base_link -> camera``: up ``camera_height``, rotated to the optical frame."""
-    return transform(stamp_ns, 'base_link', 'camera', (0.0, 0.0, camera_height),
+    return transform(stamp_ns, BASE_FRAME, CAMERA_FRAME, (0.0, 0.0, camera_height),
                      BASE_TO_CAMERA_QUATERNION)
 
 
@@ -157,7 +158,7 @@ def odometry_message(stamp_ns: int, pose: np.ndarray, twist: np.ndarray,
                          twist_variance[1]]).astype(np.float64).reshape(-1)
     vec = _T['geometry_msgs/msg/Vector3']
     return _T['nav_msgs/msg/Odometry'](
-        header=header(stamp_ns, 'odom'), child_frame_id='base_link',
+        header=header(stamp_ns, ODOM_FRAME), child_frame_id=BASE_FRAME,
         pose=_T['geometry_msgs/msg/PoseWithCovariance'](
             pose=_pose(x, y, 0.0, yaw_quaternion(yaw)), covariance=pose_cov),
         twist=_T['geometry_msgs/msg/TwistWithCovariance'](

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from landmark_db.database import LandmarkDatabase
-from landmark_localizer.evaluation import associate, find_teleports
+from landmark_localizer.bench.evaluation import associate, find_teleports
 
 __all__ = ['save_trajectory_figure']
 

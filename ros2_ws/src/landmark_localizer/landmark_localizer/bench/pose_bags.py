@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from landmark_localizer.errors import LocalizerError
+from vbn_common import names
 from vbn_common.bags import TYPESTORE, BagWriter, default_qos, deserialize, open_bag
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.frames import quaternion_yaw, yaw_quaternion
@@ -35,14 +36,10 @@ __all__ = ['PoseBag', 'PoseRecord', 'RunBag', 'read_pose_bag', 'read_run_bag',
 
 _LOG = logging.getLogger(__name__)
 
-RAW_TOPIC = '/camera/image_raw'
-COMPRESSED_TOPIC = '/camera/image_raw/compressed'
-ODOM_TOPIC = '/odom'
-TRUTH_TOPIC = '/ground_truth/pose'
-POSE_TOPIC = '/localizer/pose'
-COVARIANCE_TOPIC = '/localizer/pose_with_covariance'
-REGION_TOPIC = '/localizer/region'
-DIAGNOSTICS_TOPIC = '/diagnostics'
+RAW_TOPIC, COMPRESSED_TOPIC = names.IMAGE_RAW, names.IMAGE_COMPRESSED
+ODOM_TOPIC, TRUTH_TOPIC = names.ODOM, names.GROUND_TRUTH_POSE
+POSE_TOPIC, COVARIANCE_TOPIC = names.LOCALIZER_POSE, names.LOCALIZER_POSE_WITH_COVARIANCE
+REGION_TOPIC, DIAGNOSTICS_TOPIC = names.LOCALIZER_REGION, names.DIAGNOSTICS
 
 _POSE_TYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped',
                'nav_msgs/msg/Odometry')
@@ -285,7 +282,7 @@ def write_pose_bag(path: str | os.PathLike[str], records: Iterable[PoseRecord],
                 bag.write(c_region, stamp, _T['std_msgs/msg/Int32'](data=int(record.region)))
                 if record.pose is None:
                     continue
-                header = _header(stamp, 'map')
+                header = _header(stamp, names.MAP_FRAME)
                 pose = _pose(record.pose)
                 bag.write(c_pose, stamp, _T['geometry_msgs/msg/PoseStamped'](
                     header=header, pose=pose))

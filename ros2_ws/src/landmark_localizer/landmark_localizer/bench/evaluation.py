@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from landmark_localizer.errors import LocalizerError
+from vbn_common import names
 from vbn_common.geometry.frames import wrap_angle
 
 __all__ = ['Accuracy', 'Check', 'Latency', 'RegionChanges', 'RunEvaluation', 'Thresholds',
@@ -381,8 +382,8 @@ def evaluate_run(frame_stamps_ns: np.ndarray, regions: np.ndarray, frame_poses: 
                          falls_to_lost, latency, accuracy, None, recovery)
 
 
-def evo_ape(bag: str | os.PathLike[str], reference: str = '/ground_truth/pose',
-            estimate: str = '/localizer/pose', max_diff_s: float = 0.01) -> Accuracy:
+def evo_ape(bag: str | os.PathLike[str], reference: str = names.GROUND_TRUTH_POSE,
+            estimate: str = names.LOCALIZER_POSE, max_diff_s: float = 0.01) -> Accuracy:
     """Compute the accuracy as evo does from a bag (``evo_ape bag2 BAG REF EST``).
 
     evo's bag reader loads both topics, :func:`evo.core.sync.associate_trajectories`

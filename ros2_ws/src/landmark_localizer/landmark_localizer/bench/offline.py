@@ -1,6 +1,6 @@
 """The localizer core over a recorded run, offline and as fast as it can (``vbn localize``).
 
-:func:`localize_run` feeds every image of a :class:`~landmark_localizer.pose_bags.RunBag`
+:func:`localize_run` feeds every image of a :class:`~landmark_localizer.bench.pose_bags.RunBag`
 to one :class:`~landmark_localizer.localizer.Localizer`, in the bag's order, with the
 odometry interpolated at the image's stamp (:func:`interpolate_poses`), and times each
 frame as the robot would see it: deserializing and decoding the image included.
@@ -15,15 +15,15 @@ import time
 
 import numpy as np
 
-from landmark_localizer.evaluation import (
+from landmark_localizer.bench.evaluation import (
     VOTING_EVENTS,
     RunEvaluation,
     evaluate_run,
     latency_summary,
 )
+from landmark_localizer.bench.pose_bags import PoseRecord, RunBag
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
-from landmark_localizer.pose_bags import PoseRecord, RunBag
 from vbn_common.geometry.frames import wrap_angle
 
 __all__ = ['OfflineRun', 'coverage_split', 'evaluate_offline', 'interpolate_poses',
