@@ -88,3 +88,9 @@ def room_build(tmp_path_factory) -> dict:
                           capture_output=True, text=True, timeout=1200)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     return {'db': db, 'report': folder / 'report', 'output': proc.stdout}
+
+
+@pytest.fixture(scope='session')
+def room_db(room_build: dict) -> Path:
+    """The session's room database (built once with the builder's defaults)."""
+    return room_build['db']

@@ -22,7 +22,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'localizer = landmark_localizer.node:main',
+            'localizer = landmark_localizer.main:main',
         ],
         'vbn.commands': [
             'localize = landmark_localizer.cli.localize:register',

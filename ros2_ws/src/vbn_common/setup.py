@@ -20,7 +20,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'dds_probe = vbn_common.dds_probe:main',
+            'dds_probe = vbn_common.dds_probe_main:main',
         ],
         'vbn.commands': [
             'doctor = vbn_common.cli.doctor:register',

@@ -22,7 +22,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'builder = visibility_builder.builder_node:main',
+            'builder = visibility_builder.main:main',
         ],
         'vbn.commands': [
             'render = visibility_builder.cli.render:register',

@@ -14,7 +14,7 @@ from sensor_msgs.msg import CameraInfo
 from landmark_localizer import conversions
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Estimate
-from landmark_localizer.node import FrameStats, Mailbox, Warnings, reason_kind
+from landmark_localizer.node_support import FrameStats, Mailbox, Warnings, reason_kind
 from vbn_common.geometry.camera import PanoramicCamera, PinholeCamera
 
 

@@ -9,7 +9,7 @@ import yaml
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
-from landmark_localizer.node import NodeSettings, config_descriptions
+from landmark_localizer.parameters import NodeSettings, config_descriptions
 
 YAML = Path(__file__).resolve().parents[3] / 'ros2_ws' / 'src' / 'landmark_localizer' / \
     'config' / 'localizer.yaml'

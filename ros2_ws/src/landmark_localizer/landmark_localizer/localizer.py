@@ -144,6 +144,17 @@ class Localizer:
         self._handover = -1
         self.stats.resets += 1
 
+    def set_config(self, config: LocalizerConfig) -> None:
+        """Use new settings from the next frame on (a node's parameters set at run time).
+
+        Every setting is read per frame; a new ``seed`` restarts the robust solvers'
+        random generator. The region, the tracks and the motion history are kept.
+        """
+        if config.seed != self.config.seed:
+            self.rng = np.random.default_rng(config.seed)
+        self.config = config
+        self.tracker.set_config(config)
+
     def reset_motion(self) -> None:
         """Forget the motion history (odometry restarted); the region is kept."""
         self.predictor.reset()

@@ -77,6 +77,11 @@ class Tracker:
         # Per class, the frame of its last search in vain (long ago: never).
         self._searched = np.full(index.n_classes, -10**9, np.int64)
         self._reference: dict[int, np.ndarray] = {}
+        self.set_config(config)
+
+    def set_config(self, config: LocalizerConfig) -> None:
+        """Use new settings from the next frame on (windows, thresholds, cool-down)."""
+        self.config = config
         window = config.lk_window
         self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,
                         criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))

@@ -5,27 +5,21 @@
 topic. A pong carrying the same nonce proves that a publisher and a subscriber in
 two processes exchanged messages over the RMW in both directions.
 
-On a full ROS 2 install the echo side also runs as
-``ros2 run vbn_common dds_probe echo``.
+The echo side is the ``dds_probe`` executable (:mod:`vbn_common.dds_probe_main`); on a
+full ROS 2 install it also runs as ``ros2 run vbn_common dds_probe echo``.
 """
 from __future__ import annotations
 
-import argparse
-from collections.abc import Sequence
 from dataclasses import dataclass
-import sys
 import time
 
 import rclpy
-from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-from vbn_common.errors import VbnCommonError
-from vbn_common.ros_environment import check_ros_environment
-
-__all__ = ['EchoNode', 'PingResult', 'main', 'ping']
+__all__ = ['EchoNode', 'PingResult', 'ping']
 
 PING_TOPIC = '/vbn_doctor/ping'
 PONG_TOPIC = '/vbn_doctor/pong'
@@ -115,33 +109,3 @@ def ping(node: Node, text: str, suffix: str = '', timeout_s: float = 30.0,
     finally:
         node.destroy_subscription(sub)
         node.destroy_publisher(pub)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Run the echo side: ``dds_probe echo [--suffix S]``; return 2 for a bad ROS environment."""
-    parser = argparse.ArgumentParser(prog='dds_probe', description=__doc__.splitlines()[0])
-    parser.add_argument('role', choices=['echo'], help='the role of this process')
-    parser.add_argument('--suffix', default='', help='suffix of the ping/pong topic names')
-    args = parser.parse_args(rclpy.utilities.remove_ros_args(
-        list(sys.argv if argv is None else ['dds_probe', *argv]))[1:])
-    try:
-        check_ros_environment()
-        from vbn_common.ros_tools.session import rcl_errors_as_one_line
-        with rcl_errors_as_one_line('initialise ROS 2'):
-            rclpy.init()
-    except VbnCommonError as error:
-        print(f'dds_probe: error: {error}', file=sys.stderr)
-        return 2
-    node = EchoNode(args.suffix)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -14,9 +14,7 @@ pool on every core (``workers``), with a tqdm progress bar on stderr.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
-import multiprocessing
 import os
 from typing import Any
 
@@ -26,6 +24,7 @@ import numpy as np
 from vbn_common.allocator import reuse_freed_memory
 from vbn_common.errors import VbnCommonError
 from vbn_common.images import EncodedImage, decode_image
+from vbn_common.workers import map_in_processes
 
 __all__ = ['ImageFeatures', 'SiftConfig', 'extract_features', 'extract_features_scaled',
            'extract_many']
@@ -203,13 +202,6 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
             if progress:
                 progress(1)
         return results
-    # spawn, not fork: the builder node runs this with rclpy's threads alive.
-    context = multiprocessing.get_context('spawn')
     chunk = max(1, min(16, len(images) // (4 * workers)))
-    with ProcessPoolExecutor(workers, mp_context=context, initializer=_init_pool_worker,
-                             initargs=(config,)) as pool:
-        for result in pool.map(_extract_encoded, images, chunksize=chunk):
-            results.append(result)
-            if progress:
-                progress(1)
-    return results
+    return map_in_processes(_extract_encoded, images, workers, initializer=_init_pool_worker,
+                            initargs=(config,), chunksize=chunk, progress=progress)

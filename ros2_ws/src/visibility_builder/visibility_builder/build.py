@@ -277,8 +277,9 @@ class _Stages:
     def begin(self, name: str, detail: str = '') -> None:
         self.name, self.start = name, time.perf_counter()
         if self.on_stage:
-            self.on_stage(name, detail)
-        _LOG.info('%s %s', name, detail)
+            self.on_stage(name, detail)     # the caller says it (vbn build: one line)
+        else:
+            _LOG.info('%s %s', name, detail)
 
     def end(self, **counts: Any) -> None:
         self.report.seconds[self.name] = time.perf_counter() - self.start

@@ -101,11 +101,9 @@ Reference: thesis Section 6.2.1, equations (6.3) and (6.4), Figure 6.3.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 import logging
 import math
-import multiprocessing
 import time
 
 import numpy as np
@@ -113,6 +111,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from vbn_common.blas import single_threaded_blas
+from vbn_common.workers import map_in_processes
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.pair_matching import (
     chunk_by_first_pose,
@@ -316,15 +315,12 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
     check2 = (float(config.symmetry_factor) * float(config.tau)) ** 2
     with single_threaded_blas():
         if use_pool and len(chunks) > 1:
-            # spawn, not fork: the builder node runs this with rclpy's threads alive.
-            context = multiprocessing.get_context('spawn')
-            with ProcessPoolExecutor(max_workers=config.workers, mp_context=context,
-                                     initializer=init_worker) as pool:
-                results = list(pool.map(
-                    match_chunk_in_worker,
-                    [(chunk_descriptors(descriptors, chunk_pairs, chunk_self), offsets,
-                      chunk_pairs, chunk_self, tau2, config.ratio, check2)
-                     for chunk_pairs, chunk_self in chunks]))
+            results = map_in_processes(
+                match_chunk_in_worker,
+                [(chunk_descriptors(descriptors, chunk_pairs, chunk_self), offsets,
+                  chunk_pairs, chunk_self, tau2, config.ratio, check2)
+                 for chunk_pairs, chunk_self in chunks],
+                config.workers, initializer=init_worker)
         else:
             results = [match_chunk(descriptors, offsets, chunk_pairs, chunk_self, tau2,
                                     config.ratio, check2)

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from importlib import metadata
 import logging
 import os
+import signal
 import sys
 
 from landmark_db import __version__
@@ -48,12 +49,53 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that a command cleans up as on Ctrl-C."""
+
+
+def _on_sigint(signum: int, frame: object) -> None:
+    # One interrupt is enough: the command is unwinding, a second one must not cut
+    # short the termination of its workers or the removal of its temporary files.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    raise Terminated()
+
+
+def _interruptible() -> None:
+    """Let SIGINT and SIGTERM stop any command cleanly, however it was started.
+
+    A command started in the background of a script inherits SIGINT ignored (POSIX
+    shells do that without job control), and Python then never raises
+    ``KeyboardInterrupt``: ``vbn build`` ran to its end and replaced the database. Both
+    signals now unwind the command (workers terminated, temporary files removed, the
+    previous output untouched) and end it with one line.
+    """
+    signal.signal(signal.SIGINT, _on_sigint)
+    signal.signal(signal.SIGTERM, _on_sigterm)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``vbn`` and return its exit code.
 
     A ``VbnError`` or an ``OSError`` (missing file, permission) becomes one line on
-    stderr and exit code 2; a closed output pipe ends quietly; Ctrl-C exits with 130.
+    stderr and exit code 2; a closed output pipe ends quietly; Ctrl-C (SIGINT) is
+    ``vbn COMMAND: interrupted`` and exit 130, SIGTERM ``terminated`` and exit 143.
     """
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    _interruptible()
+    try:
+        return _run(argv)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _run(argv: Sequence[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -76,7 +118,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'vbn {args.command}: error: {error}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        print(f'vbn {args.command}: interrupted', file=sys.stderr)
         return 130
+    except Terminated:
+        print(f'vbn {args.command}: terminated', file=sys.stderr)
+        return 143
 
 
 if __name__ == '__main__':

@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
 
     suffix = f'_{os.getpid()}'
     echo = subprocess.Popen(
-        [sys.executable, '-m', 'vbn_common.dds_probe', 'echo', '--suffix', suffix],
+        [sys.executable, '-m', 'vbn_common.dds_probe_main', 'echo', '--suffix', suffix],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     text = f'hello from vbn doctor, nonce {uuid.uuid4().hex[:12]}'
     result = None

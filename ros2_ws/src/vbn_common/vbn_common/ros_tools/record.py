@@ -58,12 +58,16 @@ class Recorder:
         topics: Topic names to record.
         announce: Called with a line of text for each topic subscribed.
         stop_event: Set it to stop :meth:`spin` (e.g. from a signal handler).
+        bag_names: The name each topic gets in the bag, by the topic's name (default:
+            its own; a node in a namespace records ``/robot1/odom`` as ``/odom``).
     """
 
     def __init__(self, node: Node, writer: BagWriter, topics: list[str],
-                 announce: Any = print, stop_event: threading.Event | None = None) -> None:
+                 announce: Any = print, stop_event: threading.Event | None = None,
+                 bag_names: dict[str, str] | None = None) -> None:
         self.node = node
         self.writer = writer
+        self.bag_names = dict(bag_names or {})
         self.pending = list(dict.fromkeys(topics))
         self.announce = announce
         self.subscriptions: dict[str, Any] = {}
@@ -111,7 +115,8 @@ class Recorder:
                 return
         try:
             connection = self.writer.add_topic(
-                topic, msgtype, [bag_qos_from_profile(q) for q in offered], msgdef=msgdef)
+                self.bag_names.get(topic, topic), msgtype,
+                [bag_qos_from_profile(q) for q in offered], msgdef=msgdef)
         except VbnCommonError as error:
             _LOG.warning('not recording %s: %s', topic, error)
             return

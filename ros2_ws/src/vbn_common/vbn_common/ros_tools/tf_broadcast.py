@@ -58,16 +58,25 @@ class TransformBroadcaster:
     Args:
         node: The node that owns the publisher.
         static: Latch on ``/tf_static`` instead of streaming on ``/tf``.
+        topic: The topic (default ``/tf`` or ``/tf_static``, as tf2_ros; a node whose
+            names follow its namespace passes ``tf``, which resolves to ``/tf`` at the
+            root namespace).
     """
 
-    def __init__(self, node: Node, static: bool = False) -> None:
+    def __init__(self, node: Node, static: bool = False, topic: str | None = None) -> None:
         from tf2_msgs.msg import TFMessage
 
         self._message_class = TFMessage
         self.static = static
+        self.node = node
         self.publisher = node.create_publisher(
-            TFMessage, TF_STATIC if static else TF, STATIC_QOS if static else DYNAMIC_QOS)
+            TFMessage, topic or (TF_STATIC if static else TF),
+            STATIC_QOS if static else DYNAMIC_QOS)
         self._static_frames: dict[str, Any] = {}
+
+    def destroy(self) -> None:
+        """Destroy the publisher (the broadcaster cannot send afterwards)."""
+        self.node.destroy_publisher(self.publisher)
 
     def send(self, transforms: StampedTransform | Iterable[StampedTransform]) -> None:
         """Publish one transform or several in one ``TFMessage``."""
