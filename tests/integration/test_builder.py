@@ -180,6 +180,31 @@ def test_live_mode_over_dds_builds_the_same_regions(floor_build, tmp_path: Path,
         len(r.poses) for r in open_database(db).regions)
     status = progress[-1].status[0]
     assert status.name == 'builder' and status.message.startswith('done')
+    # The recording was temporary: the database names what was recorded instead.
+    source = open_database(db).info.source_bag
+    assert source.startswith('live recording by /builder of /camera/image_raw')
+    assert 'vbn_builder_' not in source
+
+    # Settings take effect at the next build; a bad value and the mode are refused.
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+    setter = ros_node.node.create_client(SetParameters, '/builder/set_parameters')
+    assert ros_node.spin_until(setter.service_is_ready, timeout=WAIT)
+
+    def set_parameter(name, value):
+        future = setter.call_async(SetParameters.Request(
+            parameters=[Parameter(name, value=value).to_parameter_msg()]))
+        assert ros_node.spin_until(future.done, timeout=WAIT)
+        return future.result().results[0]
+
+    refused = set_parameter('decomposition.k', 0)
+    assert not refused.successful and 'k' in refused.reason
+    assert not set_parameter('bag', 'other').successful          # read-only: the mode
+    assert set_parameter('decomposition.k', 3).successful
+    future = client.call_async(Trigger.Request())
+    assert ros_node.spin_until(future.done, timeout=2 * WAIT), node.output
+    assert future.result().success, future.result().message
+    assert open_database(db).info.k == 3
 
 
 if __name__ == '__main__':

@@ -26,9 +26,6 @@ def vbn(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run(['vbn', *args], capture_output=True, text=True, timeout=timeout)
 
 
-@pytest.fixture(scope='session')
-def room_db(room_build: dict) -> Path:
-    return room_build['db']  # the session's room database (conftest.py), defaults
 
 
 @pytest.fixture(scope='session')
@@ -87,3 +84,30 @@ def test_existing_output_is_refused(room_db: Path, room_run: dict) -> None:
                str(room_run['out']), '--limit', '2')
     assert proc.returncode == 2
     assert 'exists already' in proc.stderr and proc.stderr.count('\n') == 1
+
+
+def test_a_run_of_another_camera_is_an_error_naming_both(room_db: Path, tmp_path) -> None:
+    run = tmp_path / 'pinhole_run'
+    made = vbn('render', '--scene', 'room', '--kind', 'run', '--camera', 'pinhole',
+               '--duration', '1', '--compressed', '--out', str(run))
+    assert made.returncode == 0, made.stderr
+    proc = vbn('localize', '--db', str(room_db), str(run), '--out', str(tmp_path / 'poses'),
+               '--quiet')
+    assert proc.returncode == 2
+    line = proc.stderr.strip().splitlines()[-1]
+    assert line.startswith('vbn localize: error: ') and 'does not fit' in line
+    assert '640x480 pinhole' in line and '1024x256 panoramic' in line
+    assert not (tmp_path / 'poses').exists()
+
+
+def test_a_run_of_another_place_warns_that_nothing_was_recognised(room_db: Path,
+                                                                  tmp_path) -> None:
+    run = tmp_path / 'floor_run'
+    made = vbn('render', '--scene', 'floor', '--kind', 'run', '--duration', '2',
+               '--compressed', '--out', str(run))
+    assert made.returncode == 0, made.stderr
+    proc = vbn('localize', '--db', str(room_db), str(run), '--out', str(tmp_path / 'poses'),
+               '--quiet', '--no-evo')
+    assert proc.returncode == 0, proc.stderr
+    assert 'vbn localize: warning: no region of' in proc.stderr
+    assert 'is it a run of the place the database was built from?' in proc.stderr

@@ -12,6 +12,7 @@ import pytest
 from sensor_msgs.msg import CameraInfo
 
 from landmark_localizer import conversions
+from landmark_localizer.camera_check import camera_mismatch
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Estimate
 from landmark_localizer.node_support import FrameStats, Mailbox, Warnings, reason_kind
@@ -103,16 +104,16 @@ def camera_info(camera) -> CameraInfo:
 
 def test_camera_mismatch() -> None:
     panorama = PanoramicCamera(1024, 256)
-    assert conversions.camera_mismatch(camera_info(panorama), panorama) == ''
-    text = conversions.camera_mismatch(camera_info(PanoramicCamera(512, 128)), panorama)
+    assert camera_mismatch(camera_info(panorama), panorama) == ''
+    text = camera_mismatch(camera_info(PanoramicCamera(512, 128)), panorama)
     assert text.startswith('CameraInfo 512x128 panoramic') and '1024x256 panoramic' in text
     pinhole = PinholeCamera.from_fov(1024, 256, 90.0)
-    assert 'pinhole' in conversions.camera_mismatch(camera_info(pinhole), panorama)
+    assert 'pinhole' in camera_mismatch(camera_info(pinhole), panorama)
     shifted = camera_info(PanoramicCamera(1024, 256, y0=100.0))
-    assert 'cy 100' in conversions.camera_mismatch(shifted, panorama)
+    assert 'cy 100' in camera_mismatch(shifted, panorama)
     distorted = camera_info(pinhole)
     distorted.d = [0.1, 0.0, 0.0, 0.0, 0.0]
-    assert conversions.camera_mismatch(distorted, pinhole).startswith(
+    assert camera_mismatch(distorted, pinhole).startswith(
         'CameraInfo cannot be used')
 
 

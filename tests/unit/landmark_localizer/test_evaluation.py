@@ -163,3 +163,10 @@ def test_interpolated_odometry() -> None:
     assert out[1] == pytest.approx([1.5, 2.0, 0.3])
     assert np.isnan(out[2:]).all()  # in a 1.8 s gap, and before the first pose
     assert np.isnan(interpolate_poses(np.zeros(0), np.zeros((0, 3)), np.array([1]))).all()
+
+
+def test_the_trajectory_colour_scale_reaches_the_largest_error():
+    from landmark_localizer.bench.plots import error_scale_cm
+    low, high = error_scale_cm(np.array([0.004, 0.008, 0.199]))   # a 19.9 cm outlier
+    assert low == 0.1 and high == pytest.approx(19.9)
+    assert error_scale_cm(np.array([0.0001])) == (0.1, 0.2)

@@ -92,6 +92,16 @@ def test_bag_qos_round_trips_through_rclpy_profiles() -> None:
     assert back.durability == DurabilityPolicy.TRANSIENT_LOCAL
 
 
+def test_a_remote_offer_without_history_is_recorded_keep_last_10() -> None:
+    # What get_publishers_info_by_topic reports for another process's publisher.
+    remote = QoSProfile(history=HistoryPolicy.UNKNOWN, depth=0,
+                        reliability=ReliabilityPolicy.RELIABLE)
+    qos = bag_qos_from_profile(remote)
+    assert (qos.history.name, qos.depth, qos.reliability.name) == ('KEEP_LAST', 10, 'RELIABLE')
+    keep_all = bag_qos_from_profile(QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=0))
+    assert keep_all.history.name == 'KEEP_ALL'
+
+
 def test_play_qos_defaults_and_mixed_offers() -> None:
     none = profile_from_bag_qos([])
     assert none.reliability == ReliabilityPolicy.RELIABLE

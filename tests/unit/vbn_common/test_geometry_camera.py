@@ -185,3 +185,14 @@ def test_camera_from_info_refuses_bad_input(changes, message):
 def test_camera_from_info_names_a_missing_field():
     with pytest.raises(VbnCommonError, match='lacks a CameraInfo field'):
         camera_from_info(types.SimpleNamespace(width=640, height=480, k=[0.0] * 9))
+
+
+def test_panorama_projects_the_seam_into_the_image():
+    # Regression: a point a hair to the left of the seam (azimuth just under -pi) gave
+    # u = 512.0 exactly (np.mod of -1e-14), outside a 512-pixel-wide panorama.
+    camera = PanoramicCamera(512, 128)
+    uv, inside = camera.project(np.array([[-1e-16, 0.0, -1.0], [1e-16, 0.0, -1.0]]))
+    assert inside.all() and np.all((uv[:, 0] >= -0.5) & (uv[:, 0] < 511.5))
+    # the last half pixel before the seam is column 0's left half
+    uv, inside = camera.project(camera.unproject(np.array([[511.75, 64.0]])))
+    assert inside.all() and uv[0, 0] == pytest.approx(-0.25)

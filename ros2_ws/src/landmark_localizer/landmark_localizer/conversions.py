@@ -8,7 +8,8 @@ The node converts what it hears with these functions, hands arrays to the core
 - an :class:`~landmark_localizer.localizer.Estimate` to ``geometry_msgs/PoseStamped`` and
   ``PoseWithCovarianceStamped`` (:func:`pose_messages`), never with a NaN in them;
 - ``/initialpose`` to a voting hint (:func:`initial_pose_hint`);
-- ``sensor_msgs/CameraInfo`` against the database's camera (:func:`camera_mismatch`);
+- ``sensor_msgs/CameraInfo`` against the database's camera
+  (:func:`~landmark_localizer.camera_check.camera_mismatch`);
 - the node's counters to a ``diagnostic_msgs/DiagnosticArray`` (:func:`diagnostic_array`).
 
 Bad content raises :class:`~landmark_localizer.errors.LocalizerError` with one line that
@@ -27,12 +28,9 @@ import numpy as np
 
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Estimate
-from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.camera import CameraModel, camera_from_info
 from vbn_common.geometry.frames import quaternion_yaw, yaw_quaternion
 
 __all__ = [
-    'camera_mismatch',
     'covariance_6x6',
     'diagnostic_array',
     'initial_pose_hint',
@@ -161,38 +159,8 @@ def initial_pose_hint(msg: Any, global_frame_id: str, default_radius: float
     return x, y, radius
 
 
-def _describe_camera(width: int, height: int, kind: str, k: np.ndarray) -> str:
-    fx, cx, fy, cy = k[0], k[2], k[4], k[5]
-    return f'{width}x{height} {kind} (fx {fx:g}, fy {fy:g}, cx {cx:g}, cy {cy:g})'
 
 
-def camera_mismatch(info: Any, expected: CameraModel) -> str:
-    """Say how a ``sensor_msgs/CameraInfo`` differs from the database's camera.
-
-    Compared: the camera model (cylindrical panorama or pinhole, which also refuses
-    distortion), the image size and ``K`` (relative tolerance 1e-6).
-
-    Args:
-        info: The camera info message (any object with its fields).
-        expected: The database's camera (``DatabaseIndex.camera``).
-
-    Returns:
-        ``''`` when they match, else one line naming both cameras.
-    """
-    k_expected = np.asarray(expected.camera_info().k, float)
-    wanted = _describe_camera(expected.width, expected.height, expected.kind, k_expected)
-    try:
-        camera = camera_from_info(info)
-    except VbnCommonError as error:
-        return f'CameraInfo cannot be used ({error}); the database camera is {wanted}'
-    k = np.asarray(camera.camera_info().k, float)
-    same = (camera.kind == expected.kind and camera.width == expected.width
-            and camera.height == expected.height
-            and np.allclose(k, k_expected, rtol=1e-6, atol=1e-6))
-    if same:
-        return ''
-    got = _describe_camera(camera.width, camera.height, camera.kind, k)
-    return f'CameraInfo {got} does not match the database camera {wanted}'
 
 
 def diagnostic_array(stamp: Time, name: str, hardware_id: str, level: bytes, message: str,

@@ -16,6 +16,7 @@ import numpy as np
 from std_msgs.msg import Int32
 
 from landmark_localizer import conversions
+from landmark_localizer.camera_check import camera_mismatch
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Frame
 from landmark_localizer.node_support import reason_kind
@@ -81,7 +82,7 @@ class FrameHandling:
                 return
             changed = self.camera_key is not None
             self.camera_key = key
-            problem = conversions.camera_mismatch(msg, loaded.index.camera)
+            problem = camera_mismatch(msg, loaded.index.camera)
             was = self.camera_problem
             self.camera_problem = problem
         if problem:

@@ -298,7 +298,8 @@ def _camera_intrinsics(exploration: Exploration) -> CameraIntrinsics:
 def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
           db_path: str | os.PathLike[str] | None = None,
           on_stage: Callable[[str, str], None] | None = None,
-          on_image: Callable[[int], None] | None = None) -> BuildResult:
+          on_image: Callable[[int], None] | None = None,
+          source: str | None = None) -> BuildResult:
     """Build the landmark database of an exploration bag.
 
     Args:
@@ -307,6 +308,8 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
         db_path: Write the database here (atomically); None: only return it.
         on_stage: Called with ``(step name, detail)`` when a step starts.
         on_image: Called with a count each time SIFT finished images (progress).
+        source: What the database records as its source (default: the bag's path; the
+            builder node's live mode names what it recorded, its bag being temporary).
 
     Raises:
         VisibilityBuilderError: Nothing can be built (no images, no poses, too few
@@ -319,14 +322,15 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
     stages.end(frames=len(exploration.frames), pose_source=exploration.pose_source,
                skipped=dict(exploration.skipped))
     return build_from_exploration(exploration, config, db_path, stages=stages,
-                                  on_image=on_image)
+                                  on_image=on_image, source=source)
 
 
 def build_from_exploration(exploration: Exploration, config: BuildConfig = BuildConfig(),
                            db_path: str | os.PathLike[str] | None = None,
                            stages: _Stages | None = None,
                            on_stage: Callable[[str, str], None] | None = None,
-                           on_image: Callable[[int], None] | None = None) -> BuildResult:
+                           on_image: Callable[[int], None] | None = None,
+                           source: str | None = None) -> BuildResult:
     """Build from frames already read (the builder node's live mode collects them).
 
     See :func:`build`.
@@ -422,7 +426,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
 
     stages.begin('model_views')
     database = _assemble(exploration, sampling, features, classes.labels, kept, visibility,
-                         decomposition, config)
+                         decomposition, config, source or str(exploration.path))
     stages.end(regions=database.n_regions,
                regions_without_view=len(decomposition.regions) - database.n_regions,
                model_views=sum(len(r.model_views) for r in database.regions),
@@ -449,7 +453,7 @@ def _check_output(path: Path) -> None:
 def _assemble(exploration: Exploration, sampling: PoseSampling,
               features: Sequence[ImageFeatures], pose_labels: Sequence[np.ndarray],
               kept: np.ndarray, visibility: sp.csr_matrix, decomposition: Decomposition,
-              config: BuildConfig) -> LandmarkDatabase:
+              config: BuildConfig, source: str) -> LandmarkDatabase:
     frames = exploration.frames
     n_images = len(frames)
     # Database class numbering: position in ``kept``; a removed class becomes -1.
@@ -521,7 +525,7 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
     dc = config.decomposition
     info = BuildInfo(
         k=dc.k, rho=dc.rho, sigma=dc.sigma, algorithm=dc.algorithm,
-        pose_source=exploration.pose_source, source_bag=str(exploration.path),
+        pose_source=exploration.pose_source, source_bag=source,
         created_utc=utc_now_iso(), camera=_camera_intrinsics(exploration),
         frames=dict(exploration.frame_ids), sift=config.sift.as_dict(),
         parameters={**{k: v for k, v in flat_config(config).items()

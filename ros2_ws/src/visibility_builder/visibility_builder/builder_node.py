@@ -239,8 +239,12 @@ class BuilderNode(Node):
             self.images_done += count
 
         try:
+            # Live mode's bag is temporary: the database names what was recorded.
+            source = str(bag) if self.bag else (
+                f'live recording by {self.get_fully_qualified_name()} of '
+                f'{", ".join(self.recorder.subscriptions)}')
             result = build(bag, self._settings_from(values), db_path=db, on_stage=on_stage,
-                           on_image=on_image)
+                           on_image=on_image, source=source)
             database = result.database
             self.result_ok = True
             self.result_text = (f'wrote {db}: {len(database.regions)} regions, '

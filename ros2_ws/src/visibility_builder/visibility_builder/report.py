@@ -40,8 +40,10 @@ def write_report(folder: Path, result: Any, scene_name: str | None) -> None:
     before, after = report.visibility_sizes_before, report.visibility_sizes_after
     top = int(max(before.max(initial=1), after.max(initial=1)))
     bins = np.arange(1, top + 2) - 0.5 if top <= 60 else 40
+    # The first bar counts the classes seen from one pose: the legend counts them too.
     ax.hist(before[before > 0], bins=bins, alpha=0.5, label=f'after Algorithm 6.3 '
-            f'({int((before > 1).sum())} classes seen from 2+ poses)')
+            f'({int((before > 0).sum())} classes, {int((before > 1).sum())} of them seen '
+            f'from 2+ poses)')
     ax.hist(after, bins=bins, alpha=0.6, label=f'after the filters ({after.size} classes, '
             f'median {np.median(after) if after.size else 0:.0f} poses)')
     ax.set_xlabel('poses a feature class is seen from')

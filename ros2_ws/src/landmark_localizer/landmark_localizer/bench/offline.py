@@ -22,12 +22,18 @@ from landmark_localizer.bench.evaluation import (
     latency_summary,
 )
 from landmark_localizer.bench.pose_bags import PoseRecord, RunBag
+from landmark_localizer.camera_check import camera_mismatch
+from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
+from vbn_common.bags import deserialize
+from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.camera import CameraModel
 from vbn_common.geometry.frames import wrap_angle
+from vbn_common.images import decode_image
 
-__all__ = ['OfflineRun', 'coverage_split', 'evaluate_offline', 'interpolate_poses',
-           'localize_run']
+__all__ = ['OfflineRun', 'check_run_camera', 'coverage_split', 'evaluate_offline',
+           'interpolate_poses', 'localize_run', 'never_recognised']
 
 _LOG = logging.getLogger(__name__)
 
@@ -198,3 +204,34 @@ def coverage_split(result: OfflineRun, run: RunBag, index: DatabaseIndex
             'translation_median_m': float(np.median(found)) if found.size else math.nan,
             'translation_p95_m': float(np.percentile(found, 95)) if found.size else math.nan}
     return split
+
+
+def check_run_camera(run: RunBag, camera: CameraModel, db: str) -> None:
+    """Refuse a run whose camera is not the database's, naming both.
+
+    The run's first ``CameraInfo`` is compared (model, size, ``K``); a run without one is
+    judged by its first image's size.
+
+    Raises:
+        LocalizerError: the cameras differ, or the first image cannot be decoded.
+    """
+    if run.camera_info is not None:
+        problem = camera_mismatch(run.camera_info, camera)
+        if problem:
+            raise LocalizerError(f'{run.path} does not fit {db}: {problem}')
+        return
+    try:
+        image = decode_image(deserialize(run.images[0], run.image_type))
+    except VbnCommonError as error:
+        raise LocalizerError(f'{run.path}: the first image cannot be decoded: {error}') \
+            from None
+    if image.shape[:2] != (camera.height, camera.width):
+        raise LocalizerError(
+            f'{run.path} does not fit {db}: its images are {image.shape[1]}x{image.shape[0]} '
+            f'(no CameraInfo), the database camera {camera.width}x{camera.height} '
+            f'{camera.kind}')
+
+
+def never_recognised(result: OfflineRun) -> bool:
+    """Whether no frame of the run was ever in a region (no vote ever succeeded)."""
+    return not any(e.region >= 0 for e in result.estimates)

@@ -17,7 +17,10 @@ import numpy as np
 from landmark_db.database import LandmarkDatabase
 from landmark_localizer.bench.evaluation import associate, find_teleports
 
-__all__ = ['save_trajectory_figure']
+#: Errors below this are drawn at it: the colour scale is logarithmic, centimetres.
+_SCALE_MIN_CM = 0.1
+
+__all__ = ['error_scale_cm', 'save_trajectory_figure']
 
 
 def save_trajectory_figure(path: str | os.PathLike[str], database: LandmarkDatabase,
@@ -45,6 +48,7 @@ def save_trajectory_figure(path: str | os.PathLike[str], database: LandmarkDatab
     import matplotlib
 
     matplotlib.use('Agg')
+    from matplotlib.colors import LogNorm
     import matplotlib.pyplot as plt
 
     from landmark_db.plotting import draw_decomposition
@@ -66,10 +70,19 @@ def save_trajectory_figure(path: str | os.PathLike[str], database: LandmarkDatab
             rows, truth_rows = associate(pose_stamps_ns, truth_stamps_ns)
             error = np.full(len(est), np.nan)
             error[rows] = np.linalg.norm(est[rows, :2] - truth[truth_rows, :2], axis=1)
-            dots = ax.scatter(est[:, 0], est[:, 1], c=np.nan_to_num(error * 100, nan=0.0),
-                              cmap='viridis', vmin=0.0, vmax=5.0, s=7, zorder=8,
-                              label='localizer')
-            fig.colorbar(dots, ax=ax, shrink=0.6, label='position error (cm)')
+            # The scale reaches the largest error (a 20 cm outlier must not look like
+            # 5 cm), logarithmic so that millimetres stay apart; poses without a true
+            # pose at their stamp are grey.
+            known = np.isfinite(error)
+            if np.any(~known):
+                ax.scatter(est[~known, 0], est[~known, 1], color='grey', s=7, zorder=8)
+            if np.any(known):
+                cm = np.maximum(error[known] * 100, _SCALE_MIN_CM)
+                norm = LogNorm(*error_scale_cm(error[known]))
+                dots = ax.scatter(est[known, 0], est[known, 1], c=cm, cmap='viridis',
+                                  norm=norm, s=7, zorder=8, label='localizer')
+                fig.colorbar(dots, ax=ax, shrink=0.6,
+                             label=f'position error (cm; max {float(cm.max()):.1f})')
         if frame_stamps_ns is not None and len(truth):
             frames = np.asarray(frame_stamps_ns, np.int64)
             with_pose, _ = associate(frames, np.sort(np.asarray(pose_stamps_ns, np.int64)),
@@ -86,3 +99,13 @@ def save_trajectory_figure(path: str | os.PathLike[str], database: LandmarkDatab
     finally:
         plt.close(fig)
     return path
+
+
+def error_scale_cm(errors_m: np.ndarray) -> tuple[float, float]:
+    """Return the colour scale ``(low, high)`` of position errors, centimetres.
+
+    ``high`` is the largest error, so that no error is drawn smaller than it is;
+    ``low`` is 0.1 cm (the scale is logarithmic).
+    """
+    top = float(np.nanmax(errors_m)) * 100 if np.any(np.isfinite(errors_m)) else 0.0
+    return _SCALE_MIN_CM, max(top, 2 * _SCALE_MIN_CM)

@@ -61,6 +61,7 @@ class RunBag:
         truth_stamps_ns: (g,) ground-truth stamps, sorted (empty without ground truth).
         truth_poses: (g, 3) ``base_link`` poses in ``map``.
         truth_messages: The ground-truth messages as ``(bag time, msgtype, CDR)``.
+        camera_info: The first ``/camera/camera_info`` message (None without one).
     """
 
     path: Path
@@ -73,6 +74,7 @@ class RunBag:
     truth_stamps_ns: np.ndarray
     truth_poses: np.ndarray
     truth_messages: list[tuple[int, str, bytes]]
+    camera_info: Any = None
 
     @property
     def n_frames(self) -> int:
@@ -180,7 +182,9 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
             raise LocalizerError(f'bag {path} has no image topic '
                                  f'({image_topic or RAW_TOPIC + " or " + COMPRESSED_TOPIC})')
         image_type = topics[image_topic].msgtype
-        wanted = [t for t in (image_topic, ODOM_TOPIC, TRUTH_TOPIC) if t in topics]
+        wanted = [t for t in (image_topic, ODOM_TOPIC, TRUTH_TOPIC, names.CAMERA_INFO)
+                  if t in topics]
+        camera_info = None
         stamps: list[int] = []
         images: list[bytes] = []
         odom: tuple[list[int], list[np.ndarray]] = ([], [])
@@ -207,6 +211,8 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
                     truth[0].append(_stamp(msg.header, bag_ns))
                     truth[1].append(_planar_pose(msg))
                     truth_messages.append((bag_ns, msgtype, raw))
+                elif topic == names.CAMERA_INFO and camera_info is None:
+                    camera_info = deserialize(raw, msgtype)
         except VbnCommonError as error:
             raise LocalizerError(f'bag {path}: {error}') from None
     if not images:
@@ -216,7 +222,8 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
     _LOG.info('read %s: %d images (%s), %d odometry, %d ground-truth poses', path,
               len(images), image_topic, len(odom_stamps), len(truth_stamps))
     return RunBag(Path(path), image_topic, image_type, np.asarray(stamps, np.int64), images,
-                  odom_stamps, odom_poses, truth_stamps, truth_poses, truth_messages)
+                  odom_stamps, odom_poses, truth_stamps, truth_poses, truth_messages,
+                  camera_info)
 
 
 def _header(stamp_ns: int, frame: str) -> Any:

@@ -104,7 +104,13 @@ def run(args: argparse.Namespace) -> int:
     from landmark_db.cli.assignments import parse_assignments
     from landmark_db.database import open_database
     from landmark_localizer.bench.evaluation import evo_ape, format_evaluation
-    from landmark_localizer.bench.offline import coverage_split, evaluate_offline, localize_run
+    from landmark_localizer.bench.offline import (
+        check_run_camera,
+        coverage_split,
+        evaluate_offline,
+        localize_run,
+        never_recognised,
+    )
     from landmark_localizer.bench.pose_bags import read_run_bag, write_pose_bag
     from landmark_localizer.config import LocalizerConfig
     from landmark_localizer.errors import LocalizerError
@@ -130,10 +136,16 @@ def run(args: argparse.Namespace) -> int:
         localizer = Localizer(database, config)
         size_bytes = Path(args.db).stat().st_size
     run_bag = read_run_bag(args.bag, limit=args.limit, image_topic=args.image_topic)
+    if not args.baseline:
+        check_run_camera(run_bag, localizer.index.camera, args.db)
     pinned = use_one_core() if args.one_core else ''  # after the baseline's SIFT pool
     result = localize_run(localizer, run_bag, progress=_progress(args.quiet))
     n_poses = write_pose_bag(out, result.records(), run_bag.truth_messages,
                              overwrite=args.overwrite)
+    if never_recognised(result):
+        print(f'vbn localize: warning: no region of {args.db} was recognised in any of the '
+              f'{run_bag.n_frames} frames of {args.bag}: is it a run of the place the '
+              'database was built from?', file=sys.stderr)
     stats = getattr(localizer, 'stats', None)
     evaluation = evaluate_offline(result, run_bag, stats.falls_to_lost if stats else None)
     if run_bag.truth_messages and n_poses and not args.no_evo:

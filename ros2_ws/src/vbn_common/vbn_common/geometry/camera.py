@@ -259,7 +259,9 @@ class PanoramicCamera(CameraModel):
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         rho = np.hypot(points[:, 0], points[:, 2])
         alpha = np.arctan2(points[:, 0], points[:, 2])
-        u = np.mod(self.cx + self.f_az * alpha, self.width)
+        # Wrapped onto the image's columns, [-0.5, width - 0.5) as pixel centres go: a
+        # point just left of the seam is in column 0, not at u = width (outside).
+        u = np.mod(self.cx + self.f_az * alpha + 0.5, self.width) - 0.5
         with np.errstate(divide='ignore', invalid='ignore'):
             v = self.horizon_row + self.f_vertical * points[:, 1] / rho
         uv = np.stack([u, v], axis=1)

@@ -158,15 +158,29 @@ def _bag_time(duration: Any) -> QosTime:
     return QosTime(nanoseconds // 10**9, nanoseconds % 10**9)
 
 
+#: Recorded for an offer whose history DDS discovery does not tell (rclpy's default).
+RECORDED_DEPTH = 10
+
+
 def bag_qos_from_profile(profile: QoSProfile) -> Qos:
-    """Convert a publisher's offered rclpy QoS to the rosbags ``Qos`` a bag records."""
+    """Convert a publisher's offered rclpy QoS to the rosbags ``Qos`` a bag records.
+
+    DDS discovery carries reliability, durability, deadline, lifespan and liveliness but
+    not the history: a remote publisher's offer reads ``history UNKNOWN, depth 0``. A bag
+    with that replays with a depth of 0 (nothing kept), so such an offer is recorded
+    as ``keep_last`` with :data:`RECORDED_DEPTH`, the depth rclpy and rosbag2 default to.
+    """
     def enum(target: Any, value: Any) -> Any:
         try:
             return target(int(value))
         except ValueError:
             return target.UNKNOWN
+    history, depth = enum(QosHistory, profile.history), int(profile.depth)
+    if history in (QosHistory.UNKNOWN, QosHistory.SYSTEM_DEFAULT) or (
+            history == QosHistory.KEEP_LAST and depth <= 0):
+        history, depth = QosHistory.KEEP_LAST, RECORDED_DEPTH
     return Qos(
-        enum(QosHistory, profile.history), int(profile.depth),
+        history, depth,
         enum(QosReliability, profile.reliability), enum(QosDurability, profile.durability),
         _bag_time(profile.deadline), _bag_time(profile.lifespan),
         enum(QosLiveliness, profile.liveliness), _bag_time(profile.liveliness_lease_duration),
