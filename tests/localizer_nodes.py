@@ -98,6 +98,15 @@ class Listener:
         status = [s for s in self.diagnostics[-1].status if s.name == 'localizer'][0]
         return {kv.key: kv.value for kv in status.values}
 
+    def wait_settled(self, timeout: float = 60.0) -> dict[str, str]:
+        """Wait until the node has handled every frame it received and every pose it
+        published has arrived here (what follows the end of a playback)."""
+        def settled(s: dict[str, str]) -> bool:
+            handled = int(s['frames_processed']) + int(s['frames_dropped'])
+            return handled >= int(s['frames_received']) and \
+                len(self.poses) >= int(s['poses_published'])
+        return self.wait_status(settled, timeout)
+
     def wait_status(self, predicate, timeout: float = 30.0) -> dict[str, str]:
         count = len(self.diagnostics)
         assert self.ros.spin_until(lambda: len(self.diagnostics) > count and
