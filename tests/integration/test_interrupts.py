@@ -61,12 +61,21 @@ def _wait_for(log: Path, text: str, proc: subprocess.Popen, timeout: float = 120
         time.sleep(0.05)
 
 
+def _is_worker(pid: int) -> bool:
+    """A pool worker (not multiprocessing's resource tracker)."""
+    try:
+        cmdline = Path(f'/proc/{pid}/cmdline').read_bytes()
+    except OSError:
+        return False
+    return b'spawn_main' in cmdline and b'resource_tracker' not in cmdline
+
+
 def _workers_started(proc: subprocess.Popen, count: int, timeout: float = 60) -> set[int]:
     deadline = time.monotonic() + timeout
-    while len(kids := _alive(_children(proc.pid))) < count:
+    while len({k for k in _alive(_children(proc.pid)) if _is_worker(k)}) < count:
         assert proc.poll() is None and time.monotonic() < deadline
         time.sleep(0.05)
-    return kids
+    return _alive(_children(proc.pid))
 
 
 @pytest.fixture
@@ -76,7 +85,7 @@ def previous_db(room_db, tmp_path) -> Path:
     return db
 
 
-@pytest.mark.parametrize('how', ['alone', 'group_twice'])
+@pytest.mark.parametrize('how', ['alone', 'group_twice', 'sigterm'])
 def test_vbn_build_interrupted_during_sift(how, previous_db, ros_env, tmp_path) -> None:
     before = file_digest(previous_db)
     log = tmp_path / 'build.log'
@@ -90,13 +99,17 @@ def test_vbn_build_interrupted_during_sift(how, previous_db, ros_env, tmp_path) 
     workers = _workers_started(proc, 2)
     if how == 'alone':
         os.kill(proc.pid, signal.SIGINT)
+    elif how == 'sigterm':
+        os.kill(proc.pid, signal.SIGTERM)
     else:
         os.killpg(proc.pid, signal.SIGINT)
         time.sleep(0.02)       # the second Ctrl-C of an impatient user
         os.killpg(proc.pid, signal.SIGINT)
-    assert proc.wait(timeout=30) == 130, log.read_text()
+    code, last = (143, 'vbn build: terminated') if how == 'sigterm' else \
+        (130, 'vbn build: interrupted')
+    assert proc.wait(timeout=30) == code, log.read_text()
     output = log.read_text()
-    assert output.strip().splitlines()[-1] == 'vbn build: interrupted', output
+    assert output.strip().splitlines()[-1] == last, output
     assert 'Traceback' not in output and 'KeyboardInterrupt' not in output
     deadline = time.monotonic() + 10
     while _alive(workers) and time.monotonic() < deadline:

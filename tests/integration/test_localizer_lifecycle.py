@@ -122,14 +122,19 @@ def test_transitions_through_the_lifecycle_services(room_db, start_process, ros_
     assert lifecycle.transition('configure') and lifecycle.state() == INACTIVE
     listener = Listener(ros_node)
     publisher = Publisher(ros_node, run)      # waits until the node subscribes
-    # Inactive: frames are ignored and nothing is published.
+    assert ros_node.spin_until(lambda: ros_node.node.count_publishers('/localizer/region'),
+                               timeout=WAIT)  # the listener hears the node's publisher
+    # Inactive: frames are ignored (not even counted) and nothing is published.
     index = stream(ros_node, publisher, 0, 10)
     assert listener.regions == [] and listener.poses == []
 
     assert lifecycle.transition('activate') and lifecycle.state() == ACTIVE
+    activated_at = index
     assert ros_node.spin_until(lambda: listener.markers, timeout=WAIT)   # latched regions
     index = stream(ros_node, publisher, index, 200, until=lambda: len(listener.poses) >= 5)
     assert len(listener.poses) >= 5, node.output
+    status = listener.wait_status(lambda s: True)
+    assert int(status['frames_received']) <= index - activated_at   # none while inactive
 
     assert lifecycle.transition('deactivate') and lifecycle.state() == INACTIVE
     stopped = time.monotonic()
@@ -240,4 +245,8 @@ def test_parameters_take_effect_or_are_refused(room_db, start_process, ros_node,
     assert len(listener.poses) >= poses + 3, node.output
     assert ros_node.spin_until(lambda: len(listener.markers) > markers, timeout=WAIT)
     assert params.get('db') == str(copy)
+    # The same path again reloads too (a database rebuilt in place).
+    assert params.set('db', str(copy)) == (True, '')
+    assert ros_node.spin_until(lambda: node.output.count('database reloaded') == 2,
+                               timeout=WAIT)
     assert 'Traceback' not in node.output

@@ -5,6 +5,7 @@ import math
 
 import pytest
 
+from vbn_common.errors import VbnCommonError
 from vbn_common.workers import map_in_processes
 
 
@@ -13,7 +14,7 @@ def test_results_come_in_order_with_progress():
     out = map_in_processes(math.sqrt, [float(i * i) for i in range(20)], 2, chunksize=3,
                            progress=ticks.append)
     assert out == [float(i) for i in range(20)]
-    assert ticks == [1] * 20
+    assert sum(ticks) == 20 and ticks == [3] * 6 + [2]       # one call per chunk
 
 
 def test_an_error_in_a_worker_reaches_the_caller():
@@ -27,3 +28,18 @@ def test_an_error_in_the_progress_callback_stops_the_map():
 
     with pytest.raises(KeyboardInterrupt):
         map_in_processes(math.sqrt, [1.0] * 50, 2, progress=stop)
+
+
+def test_a_worker_that_dies_is_an_error_not_a_hang():
+    # os._exit in a worker (as the OOM killer's SIGKILL): multiprocessing.Pool would
+    # replace the worker, lose the task and wait for ever.
+    import os
+    with pytest.raises(VbnCommonError, match='a worker process died'):
+        map_in_processes(os._exit, [3, 3], 2)
+
+
+def test_the_workers_are_gone_after_an_error():
+    import multiprocessing
+    with pytest.raises(ValueError):
+        map_in_processes(math.sqrt, [-1.0] * 8, 2)
+    assert multiprocessing.active_children() == []

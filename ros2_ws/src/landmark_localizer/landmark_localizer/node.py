@@ -162,7 +162,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         self.active = False
         self.failure = ''
         self._endpoints: list[Any] = []   # subscriptions, services (configure)
-        self._timers: list[Any] = []      # diagnostics, tf republishing (activate)
+        self._own_timers: list[Any] = []      # diagnostics, tf republishing (activate)
         self.tf: TransformBroadcaster | None = None
         self.worker: FrameWorker | None = None
         self.pose_pub = self.pose_cov_pub = self.region_pub = None
@@ -214,7 +214,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         if not configured:
             return SetParametersResult(successful=True)   # used at the next configure
         loaded = self.loaded
-        if settings.db != loaded.path:
+        if 'db' in changes:     # even the same path: the file may have been rebuilt
             try:
                 loaded = load_database(settings.db, config)
             except VbnError as error:
@@ -230,6 +230,11 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         """Use new settings (and maybe a new database) from the next frame on."""
         old = self.settings
         new_database = loaded is not self.loaded
+        frames = (settings.global_frame_id, settings.odom_frame_id, settings.base_frame_id)
+        if new_database or frames != (old.global_frame_id, old.odom_frame_id,
+                                      old.base_frame_id):
+            with self.lock:
+                self.transform = None   # of the old map or frames: not republished
         with self.localizer_lock:
             if new_database:
                 self.loaded = loaded
@@ -240,9 +245,8 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         self.settings = settings
         if settings.tf_broadcast and self.tf is None:
             self.tf = TransformBroadcaster(self, topic=relative(names.TF))
-        elif not settings.tf_broadcast and self.tf is not None:
-            self.tf.destroy()
-            self.tf = None
+        # Switched off, the broadcaster stays (the worker may be sending with it) and
+        # is silent: every send checks settings.tf_broadcast.
         if self.active and (old.transform_publish_period != settings.transform_publish_period
                             or old.tf_broadcast != settings.tf_broadcast):
             self._restart_timers()
@@ -281,8 +285,9 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         try:
             settings, config = settings_from_values(self._values())
             loaded = load_database(settings.db, config)
-        except VbnError as error:
-            self.failure = str(error)
+        except Exception as error:  # noqa: BLE001 - rclpy would swallow it without a word
+            self.failure = str(error) if isinstance(error, VbnError) else \
+                f'{type(error).__name__}: {error}'.splitlines()[0]
             if not self._autostarting:
                 self.log.error(f'configure failed: {error}')
             return _FAILURE
@@ -379,31 +384,32 @@ class LocalizerNode(FrameHandling, LifecycleNode):
             else None
         sub = self.create_subscription
         self._endpoints = [
-            sub(Odometry, relative(names.ODOM), self._guarded('odom', self._on_odom),
+            sub(Odometry, relative(names.ODOM), self._guarded(names.ODOM, self._on_odom),
                 sensor_qos),
             sub(CameraInfo, relative(names.CAMERA_INFO),
-                self._guarded('camera_info', self._on_camera_info), sensor_qos),
+                self._guarded(names.CAMERA_INFO, self._on_camera_info), sensor_qos),
             sub(Image, relative(names.IMAGE_RAW), self._on_image, frame_qos),
             sub(CompressedImage, relative(names.IMAGE_COMPRESSED), self._on_image, frame_qos),
             sub(PoseWithCovarianceStamped, relative(names.INITIAL_POSE),
-                self._guarded('initialpose', self._on_initial_pose), 10),
+                self._guarded(names.INITIAL_POSE, self._on_initial_pose), 10),
             self.create_service(Empty, '~/reinitialize_global_localization',
                                 self._on_reinitialize),
         ]
 
     def _restart_timers(self) -> None:
-        for timer in self._timers:
+        for timer in list(self._own_timers):
             self.destroy_timer(timer)
-        self._timers = [self.create_timer(1.0, self._publish_diagnostics)]
+        timers = [self.create_timer(1.0, self._publish_diagnostics)]
         period = self.settings.transform_publish_period
         if self.tf is not None and period > 0:
-            self._timers.append(self.create_timer(period, self._republish_transform))
+            timers.append(self.create_timer(period, self._republish_transform))
+        self._own_timers = timers
 
     def _stop_processing(self) -> None:
         self.active = False
-        for timer in self._timers:
+        for timer in list(self._own_timers):
             self.destroy_timer(timer)
-        self._timers = []
+        self._own_timers = []
         if self.worker is not None:
             self.worker.close()
             self.worker = None
@@ -434,6 +440,10 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                 stamp=self.get_clock().now().to_msg()))
 
     # -- inputs (executor thread) ------------------------------------------------------------
+    def topic(self, name: str) -> str:
+        """Return a contract topic as this node resolves it (its namespace, remaps)."""
+        return self.resolve_topic_name(relative(name))
+
     def _guarded(self, topic: str, callback: Callable[[Any], None]) -> Callable[[Any], None]:
         """Return ``callback`` that logs what it raises instead of ending the node."""
         def guarded(msg: Any) -> None:
@@ -443,7 +453,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                 if self.context.ok():
                     text = f'{type(error).__name__}: {error}'.splitlines()[0]
                     self.warnings.warn(f'{topic}:{reason_kind(text)}',
-                                       f'{self.resolve_topic_name(topic)}: message ignored: '
+                                       f'{self.topic(topic)}: message ignored: '
                                        f'{text}')
         return guarded
 
@@ -456,12 +466,12 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                 msg, self.settings.global_frame_id, loaded.localizer.config.hint_radius_m)
         except LocalizerError as error:
             self.warnings.warn('initialpose:' + reason_kind(str(error)),
-                               f'/initialpose: {error}: ignored')
+                               f'{self.topic(names.INITIAL_POSE)}: {error}: ignored')
             return
         with self.localizer_lock:
             loaded.localizer.set_hint(x, y, radius)
-        self.log.info(f'/initialpose ({x:.2f}, {y:.2f}): voting among the regions '
-                      f'within {radius:.2f} m')
+        self.log.info(f'{self.topic(names.INITIAL_POSE)} ({x:.2f}, {y:.2f}): voting among '
+                      f'the regions within {radius:.2f} m')
 
     def _on_reinitialize(self, _request: Any, response: Any) -> Any:
         with self.localizer_lock:
@@ -505,7 +515,8 @@ class LocalizerNode(FrameHandling, LifecycleNode):
     def _republish_transform(self) -> None:
         with self.lock:
             transform, latest = self.transform, self.odometry.latest_stamp
-        if transform is None or latest is None or self.tf is None:
+        if transform is None or latest is None or self.tf is None or \
+                not self.settings.tf_broadcast:
             return
         stamp = max(transform.stamp_ns,
                     latest + int(self.settings.transform_tolerance * 1e9))

@@ -21,6 +21,7 @@ from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Frame
 from landmark_localizer.node_support import reason_kind
 from landmark_localizer.odometry import ACCEPTED, JUMP, TIME_BACK
+from vbn_common import names
 from vbn_common.geometry.transforms import StampedTransform, correction
 from vbn_common.images import ImageDecodeError, decode_image
 
@@ -44,17 +45,18 @@ class FrameHandling:
     """Odometry, CameraInfo and frames of :class:`~landmark_localizer.node.LocalizerNode`."""
 
     def _on_odom(self, msg: Any) -> None:
+        odom = self.topic(names.ODOM)
         frames = (msg.header.frame_id, msg.child_frame_id)
         wanted = (self.settings.odom_frame_id, self.settings.base_frame_id)
         if any(got and got != want for got, want in zip(frames, wanted, strict=True)):
-            self.warnings.warn('odom_frames', f'/odom is {frames[0]} -> {frames[1]}, '
+            self.warnings.warn('odom_frames', f'{odom} is {frames[0]} -> {frames[1]}, '
                                f'expected {wanted[0]} -> {wanted[1]}: ignored')
             return
         try:
             stamp, pose = conversions.odometry_pose(msg)
         except LocalizerError as error:
             stamp, pose = conversions.stamp_to_ns(msg.header.stamp), np.full(3, np.nan)
-            self.warnings.warn('odom_bad', f'/odom: {error}: ignored, odometry history '
+            self.warnings.warn('odom_bad', f'{odom}: {error}: ignored, odometry history '
                                'restarted')
         with self.lock:
             result = self.odometry.add(stamp, pose)
@@ -62,11 +64,11 @@ class FrameHandling:
                 self.odom_restarted = True
             self.odom_arrived.notify_all()
         if result == JUMP:
-            self.warnings.warn('odom_jump', f'/odom jumped by more than '
+            self.warnings.warn('odom_jump', f'{odom} jumped by more than '
                                f'{self.settings.odom_max_jump_m:g} m: odometry history '
                                'restarted')
         elif result == TIME_BACK:
-            self.warnings.warn('odom_back', '/odom stamps went back: odometry history '
+            self.warnings.warn('odom_back', f'{odom} stamps went back: odometry history '
                                'restarted')
 
     def _on_camera_info(self, msg: Any) -> None:
@@ -120,7 +122,8 @@ class FrameHandling:
         if self.first_image is None:
             self.first_image = start
         if not seen and start - self.first_image >= CAMERA_INFO_GRACE_S:
-            self.warnings.warn('no_camera_info', 'no CameraInfo on /camera/camera_info: '
+            self.warnings.warn('no_camera_info',
+                               f'no CameraInfo on {self.topic(names.CAMERA_INFO)}: '
                                f'assuming the database camera {camera.width}x'
                                f'{camera.height} {camera.kind}')
         try:
@@ -169,7 +172,7 @@ class FrameHandling:
         self.pose_cov_pub.publish(messages[1])
         self.stats.poses += 1
         tf = self.tf
-        if odom is None or tf is None:
+        if odom is None or tf is None or not s.tf_broadcast:
             return
         stamp = estimate.stamp_ns
         x, y, yaw = (float(v) for v in estimate.pose)

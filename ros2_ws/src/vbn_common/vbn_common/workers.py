@@ -21,16 +21,25 @@ import signal
 import threading
 from typing import Any
 
+from vbn_common.errors import VbnCommonError
+
 __all__ = ['map_in_processes']
 
 #: Room for glibc's ``struct sigaction`` (152 bytes on x86-64 and aarch64), saved whole.
 _SIGACTION_BYTES = 256
+#: How often the map checks that its workers are alive, seconds.
+_WATCH_S = 0.5
 
 
 def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     if initializer is not None:
         initializer(*initargs)
+
+
+def _run_chunk(job: tuple[Callable[[Any], Any], list[Any]]) -> list[Any]:
+    func, chunk = job
+    return [func(item) for item in chunk]
 
 
 def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: int, *,
@@ -46,14 +55,16 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
         initializer: Called once in each worker with ``initargs``.
         initargs: Arguments of ``initializer``.
         chunksize: Items sent to a worker at once.
-        progress: Called with 1 after each result, in the calling process.
+        progress: Called with the number of results just finished (a chunk's), in the
+            calling process.
 
     Returns:
         The results, in the order of ``items``.
 
     Raises:
-        Whatever ``func`` raised in a worker, or ``KeyboardInterrupt``: in both cases the
-        workers are terminated and joined first.
+        Whatever ``func`` raised in a worker, ``KeyboardInterrupt``, or
+        :class:`~vbn_common.errors.VbnCommonError` when a worker died: in every case
+        the workers are terminated and joined first.
     """
     context = multiprocessing.get_context('spawn')
     results: list[Any] = []
@@ -64,10 +75,30 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
         with _sigint_ignored():
             pool = context.Pool(workers, initializer=_start_worker,
                                 initargs=(initializer, initargs))
-        for result in pool.imap(func, items, chunksize=max(1, int(chunksize))):
-            results.append(result)
+        # multiprocessing.Pool replaces a worker that dies (the OOM killer, a crash in
+        # OpenCV) and loses its task: the map would wait for ever. Watch the workers.
+        workers_started = list(pool._pool)
+        items = list(items)
+        size = max(1, int(chunksize))
+        # Chunks made here: imap with chunksize > 1 returns a generator without timeout.
+        chunks = [(func, items[i:i + size]) for i in range(0, len(items), size)]
+        results_of = pool.imap(_run_chunk, chunks)
+        while True:
+            try:
+                result = results_of.next(timeout=_WATCH_S)
+            except StopIteration:
+                break
+            except multiprocessing.TimeoutError:
+                dead = [w for w in workers_started if w.exitcode is not None]
+                if dead:
+                    raise VbnCommonError(
+                        f'a worker process died (exit code {dead[0].exitcode}) while '
+                        f'computing {getattr(func, "__name__", func)}: out of memory?') \
+                        from None
+                continue
+            results.extend(result)
             if progress is not None:
-                progress(1)
+                progress(len(result))
         pool.close()
     except BaseException:
         if pool is not None:
@@ -131,12 +162,16 @@ def _save_sigaction() -> ctypes.Array | None:
 
 @contextmanager
 def _no_second_interrupt() -> Iterator[None]:
-    """Let a second Ctrl-C not cut the workers' termination short (main thread only)."""
+    """Let a second Ctrl-C or a SIGTERM not cut the workers' termination short.
+
+    Main thread only (where Python can set handlers).
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

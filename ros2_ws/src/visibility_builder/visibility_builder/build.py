@@ -271,10 +271,13 @@ class _Stages:
                  on_stage: Callable[[str, str], None] | None) -> None:
         self.report = report
         self.on_stage = on_stage
+        self.check_stop: Callable[[], None] | None = None
         self.name = ''
         self.start = 0.0
 
     def begin(self, name: str, detail: str = '') -> None:
+        if self.check_stop is not None:
+            self.check_stop()
         self.name, self.start = name, time.perf_counter()
         if self.on_stage:
             self.on_stage(name, detail)     # the caller says it (vbn build: one line)
@@ -299,7 +302,8 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
           db_path: str | os.PathLike[str] | None = None,
           on_stage: Callable[[str, str], None] | None = None,
           on_image: Callable[[int], None] | None = None,
-          source: str | None = None) -> BuildResult:
+          source: str | None = None,
+          check_stop: Callable[[], None] | None = None) -> BuildResult:
     """Build the landmark database of an exploration bag.
 
     Args:
@@ -310,6 +314,9 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
         on_image: Called with a count each time SIFT finished images (progress).
         source: What the database records as its source (default: the bag's path; the
             builder node's live mode names what it recorded, its bag being temporary).
+        check_stop: Called between units of the long steps (each SIFT image, each chunk
+            of pose pairs matched in the process pool) and at each step: what it raises
+            stops the build there (the workers are terminated, nothing is written).
 
     Raises:
         VisibilityBuilderError: Nothing can be built (no images, no poses, too few
@@ -322,7 +329,7 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
     stages.end(frames=len(exploration.frames), pose_source=exploration.pose_source,
                skipped=dict(exploration.skipped))
     return build_from_exploration(exploration, config, db_path, stages=stages,
-                                  on_image=on_image, source=source)
+                                  on_image=on_image, source=source, check_stop=check_stop)
 
 
 def build_from_exploration(exploration: Exploration, config: BuildConfig = BuildConfig(),
@@ -330,13 +337,22 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
                            stages: _Stages | None = None,
                            on_stage: Callable[[str, str], None] | None = None,
                            on_image: Callable[[int], None] | None = None,
-                           source: str | None = None) -> BuildResult:
+                           source: str | None = None,
+                           check_stop: Callable[[], None] | None = None) -> BuildResult:
     """Build from frames already read (the builder node's live mode collects them).
 
     See :func:`build`.
     """
     stages = stages or _Stages(BuildReport(), on_stage)
+    stages.check_stop = check_stop
     report = stages.report
+
+    def image_done(count: int) -> None:
+        if check_stop is not None:
+            check_stop()
+        if on_image is not None:
+            on_image(count)
+
     if db_path is not None:
         _check_output(Path(db_path))
     frames = exploration.frames
@@ -350,7 +366,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
 
     stages.begin('features', f'{len(frames)} images on {config.n_workers} process(es)')
     results = extract_many([f.image for f in frames], config.sift, config.n_workers,
-                           progress=on_image)
+                           progress=image_done)
     features: list[ImageFeatures] = []
     undecodable = 0
     for frame, result in zip(frames, results, strict=True):
@@ -370,7 +386,8 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
         for members in sampling.frames_of_pose]
     classes = correspondence_classes(
         pose_descriptors, sampling.edges,
-        replace(config.classes, workers=max(config.classes.workers, config.n_workers)))
+        replace(config.classes, workers=max(config.classes.workers, config.n_workers)),
+        progress=(lambda _count: check_stop()) if check_stop is not None else None)
     # One scene point per class: the rays of its members must meet (verification.py).
     classes = verify_classes(
         classes,

@@ -102,6 +102,7 @@ class BuilderNode(Node):
         self.lock = threading.Lock()
         self.building = False
         self.closing = False
+        self.closing_stopped_build = False
         self.built = threading.Event()
         self.result_text = ''
         self.result_ok = False
@@ -212,6 +213,10 @@ class BuilderNode(Node):
                 return
             if self.writer is not None:
                 self.recorder.drain(_NoExecutor())
+                # What comes after the build started is not recorded (the bag is closed).
+                for subscription in self.recorder.subscriptions.values():
+                    self.destroy_subscription(subscription)
+                self.recorder.pending.clear()
                 self.writer.close()
                 self.writer = None
         self.get_logger().info(f'received {self.images_received()} images; building '
@@ -230,12 +235,10 @@ class BuilderNode(Node):
         db, report = values['db'], values['report']
 
         def on_stage(name: str, detail: str) -> None:
-            self._stop_if_closing()
             self.stage, self.detail = name, detail
             self._publish_progress()
 
         def on_image(count: int) -> None:
-            self._stop_if_closing()        # between images: the SIFT workers terminated
             self.images_done += count
 
         try:
@@ -243,8 +246,9 @@ class BuilderNode(Node):
             source = str(bag) if self.bag else (
                 f'live recording by {self.get_fully_qualified_name()} of '
                 f'{", ".join(self.recorder.subscriptions)}')
+            # A shutdown stops the build at its next step, image or chunk of pose pairs.
             result = build(bag, self._settings_from(values), db_path=db, on_stage=on_stage,
-                           on_image=on_image, source=source)
+                           on_image=on_image, source=source, check_stop=self._stop_if_closing)
             database = result.database
             self.result_ok = True
             self.result_text = (f'wrote {db}: {len(database.regions)} regions, '
@@ -269,8 +273,9 @@ class BuilderNode(Node):
             if not self.closing:
                 self.get_logger().error(f'build failed: {text}')
         finally:
-            self.building = False
-            self.built.set()
+            with self.lock:     # built before building: no second build slips between
+                self.built.set()
+                self.building = False
             self._publish_progress()
             if self.get_parameter('shutdown_after_build').value and not self.closing:
                 from rclpy.utilities import try_shutdown
@@ -278,6 +283,7 @@ class BuilderNode(Node):
 
     def _stop_if_closing(self) -> None:
         if self.closing:
+            self.closing_stopped_build = True
             raise VisibilityBuilderError('build stopped: the node is shutting down')
 
     def _publish_progress(self) -> None:
@@ -301,10 +307,15 @@ class BuilderNode(Node):
         writes nothing: the previous database stays as it was.
         """
         self.closing = True
-        if self.building and self.built.wait(timeout=CLOSE_WAIT_S):
-            # rosout is gone with the context: say it on stderr, as a command would.
-            print(f'builder: build stopped by the shutdown, {self.get_parameter("db").value} '
-                  'left as it was', file=sys.stderr)
+        db = self.get_parameter('db').value
+        # rosout is gone with the context: say it on stderr, as a command would.
+        if self.building and not self.built.wait(timeout=CLOSE_WAIT_S):
+            print(f'builder: the build did not stop within {CLOSE_WAIT_S:g} s of the '
+                  f'shutdown; {db} is written only if it completes', file=sys.stderr)
+            self.exit_code = 130
+        elif self.built.is_set() and self.closing_stopped_build:
+            print(f'builder: build stopped by the shutdown, {db} left as it was',
+                  file=sys.stderr)
             self.exit_code = 130
         if self.writer is not None:
             self.writer.close()

@@ -100,7 +100,7 @@ Reference: thesis Section 6.2.1, equations (6.3) and (6.4), Figure 6.3.
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 import logging
 import math
@@ -267,7 +267,8 @@ def pose_pairs_within(edges: np.ndarray, n_poses: int, gamma: int) -> np.ndarray
 
 
 def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.ndarray,
-                           config: ClassConfig | None = None) -> ClassResult:
+                           config: ClassConfig | None = None,
+                           progress: Callable[[int], None] | None = None) -> ClassResult:
     """Compute feature classes and per-pose visibility with Algorithm 6.3.
 
     Args:
@@ -276,6 +277,8 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
             arrays (SIFT) stay ``uint8`` in memory; other dtypes are converted to float32.
         edges: ``(m, 2)`` int pose graph G (undirected).
         config: tau, gamma, ratio and workers; defaults of :class:`ClassConfig`.
+        progress: Called with 1 after each chunk of pose pairs is matched; what it raises
+            stops the matching (the pool's workers are terminated).
 
     Returns:
         The :class:`ClassResult`. ``stats`` holds: ``poses``, ``features``,
@@ -320,11 +323,14 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
                 [(chunk_descriptors(descriptors, chunk_pairs, chunk_self), offsets,
                   chunk_pairs, chunk_self, tau2, config.ratio, check2)
                  for chunk_pairs, chunk_self in chunks],
-                config.workers, initializer=init_worker)
+                config.workers, initializer=init_worker, progress=progress)
         else:
-            results = [match_chunk(descriptors, offsets, chunk_pairs, chunk_self, tau2,
-                                    config.ratio, check2)
-                       for chunk_pairs, chunk_self in chunks]
+            results = []
+            for chunk_pairs, chunk_self in chunks:
+                results.append(match_chunk(descriptors, offsets, chunk_pairs, chunk_self,
+                                           tau2, config.ratio, check2))
+                if progress is not None:
+                    progress(1)
 
     mutual = [r[0] for r in results]
     broken = [r[1] for r in results]

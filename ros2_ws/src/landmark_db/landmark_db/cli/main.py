@@ -53,16 +53,21 @@ class Terminated(BaseException):
     """SIGTERM, raised in the main thread so that a command cleans up as on Ctrl-C."""
 
 
-def _on_sigint(signum: int, frame: object) -> None:
-    # One interrupt is enough: the command is unwinding, a second one must not cut
-    # short the termination of its workers or the removal of its temporary files.
+def _unwinding() -> None:
+    # One signal is enough: the command is unwinding, a second one (Ctrl-C twice, or
+    # a launcher's SIGINT then SIGTERM) must not cut short the termination of its
+    # workers or the removal of its temporary files.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+
+
+def _on_sigint(signum: int, frame: object) -> None:
+    _unwinding()
     raise KeyboardInterrupt
 
 
 def _on_sigterm(signum: int, frame: object) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    _unwinding()
     raise Terminated()
 
 
@@ -96,8 +101,21 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(argv: Sequence[str] | None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    command = 'vbn'
+    try:
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        command = f'vbn {args.command}' if getattr(args, 'command', None) else 'vbn'
+        return _run_command(parser, args)
+    except KeyboardInterrupt:
+        print(f'{command}: interrupted', file=sys.stderr)
+        return 130
+    except Terminated:
+        print(f'{command}: terminated', file=sys.stderr)
+        return 143
+
+
+def _run_command(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     logging.basicConfig(
         level=logging.DEBUG if args.verbose else logging.INFO,
         format='%(levelname)s %(name)s: %(message)s',
@@ -117,12 +135,6 @@ def _run(argv: Sequence[str] | None) -> int:
     except OSError as error:
         print(f'vbn {args.command}: error: {error}', file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f'vbn {args.command}: interrupted', file=sys.stderr)
-        return 130
-    except Terminated:
-        print(f'vbn {args.command}: terminated', file=sys.stderr)
-        return 143
 
 
 if __name__ == '__main__':

@@ -288,6 +288,11 @@ class BagWriter:
         writer.write(connection, int(timestamp_ns), bytes(cdr_bytes))
         self.message_count += 1
 
+    @property
+    def is_open(self) -> bool:
+        """Whether messages can be written now."""
+        return self._writer is not None
+
     def _require_open(self) -> Writer:
         if self._writer is None:
             raise VbnCommonError(f'bag {self.path} is not open for writing')

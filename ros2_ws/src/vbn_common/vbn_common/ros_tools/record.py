@@ -123,6 +123,8 @@ class Recorder:
         self.counts[topic] = 0
 
         def on_message(raw: bytes, topic: str = topic, connection: Any = connection) -> None:
+            if not self.writer.is_open:   # closed by its owner: what comes late is dropped
+                return
             self.writer.write_raw(connection, time.time_ns(), raw)
             self.counts[topic] += 1
             if self.counts[topic] == 1:
