@@ -99,13 +99,22 @@ class Listener:
         return {kv.key: kv.value for kv in status.values}
 
     def wait_settled(self, timeout: float = 60.0) -> dict[str, str]:
-        """Wait until the node has handled every frame it received and every pose it
-        published has arrived here (what follows the end of a playback)."""
-        def settled(s: dict[str, str]) -> bool:
-            handled = int(s['frames_processed']) + int(s['frames_dropped'])
-            return handled >= int(s['frames_received']) and \
-                len(self.poses) >= int(s['poses_published'])
-        return self.wait_status(settled, timeout)
+        """Wait until the node has handled every frame it received and published nothing
+        for a whole diagnostics period (what follows the end of a playback).
+
+        Not "until every pose arrived here": the pose topic keeps the last 10, so a
+        listener that falls behind at 100 Hz loses some, by design.
+        """
+        def handled(s: dict[str, str]) -> bool:
+            return int(s['frames_processed']) + int(s['frames_dropped']) >= \
+                int(s['frames_received'])
+        seen: dict[int, str] = {}     # diagnostics received -> poses published then
+
+        def quiet(s: dict[str, str]) -> bool:
+            n = len(self.diagnostics)
+            seen.setdefault(n, s['poses_published'])
+            return handled(s) and seen.get(n - 1) == s['poses_published']
+        return self.wait_status(quiet, timeout)
 
     def wait_status(self, predicate, timeout: float = 30.0) -> dict[str, str]:
         count = len(self.diagnostics)

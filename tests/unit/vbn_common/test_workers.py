@@ -43,3 +43,10 @@ def test_the_workers_are_gone_after_an_error():
     with pytest.raises(ValueError):
         map_in_processes(math.sqrt, [-1.0] * 8, 2)
     assert multiprocessing.active_children() == []
+
+
+def test_the_workers_run_in_a_session_of_their_own():
+    # The terminal's Ctrl-C goes to the foreground process group: not to the workers.
+    import os
+    sessions = map_in_processes(os.getsid, [0, 0], 2)
+    assert os.getsid(0) not in sessions

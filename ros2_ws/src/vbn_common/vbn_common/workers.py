@@ -6,18 +6,27 @@ is (possibly holding the call queue's lock), and the pool's shutdown then waits 
 worker that never answers. ``vbn build`` hung that way for good in 3 of 11 tries, and a
 second Ctrl-C left workers and the resource tracker behind.
 
-Here the workers ignore SIGINT (only the parent decides), the pool is a
-``multiprocessing`` pool of the 'spawn' context (never forked: the builder node calls
-this with rclpy's threads alive), and anything that ends the map early, an interrupt
-above all, terminates the workers before it propagates. Pure Python, no rclpy.
+Here only the parent decides: the workers start in a session of their own, so that the
+terminal's Ctrl-C (sent to the foreground process group) never reaches them, not even
+while one still imports (it printed a ``KeyboardInterrupt`` traceback then), and they
+ignore SIGINT besides; the pool is a ``multiprocessing`` pool of the 'spawn' start
+method (never forked: the builder node calls this with rclpy's threads alive); anything
+that ends the map early, an interrupt above all, terminates the workers (SIGTERM)
+before it propagates, and a worker that dies is an error rather than a hang. The parent
+never ignores a signal itself: ignoring SIGINT while it started the workers lost a
+Ctrl-C to an OpenBLAS thread. Pure Python, no rclpy.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-import ctypes
 import multiprocessing
+from multiprocessing import context as mp_context
+from multiprocessing import popen_spawn_posix
+from multiprocessing import util as mp_util
+import os
 import signal
+import sys
 import threading
 from typing import Any
 
@@ -25,10 +34,60 @@ from vbn_common.errors import VbnCommonError
 
 __all__ = ['map_in_processes']
 
-#: Room for glibc's ``struct sigaction`` (152 bytes on x86-64 and aarch64), saved whole.
-_SIGACTION_BYTES = 256
 #: How often the map checks that its workers are alive, seconds.
 _WATCH_S = 0.5
+
+
+_SPAWN_LOCK = threading.Lock()
+
+
+def _spawn_in_own_session(path: str, args: list[str], passfds: Iterable[int]) -> int:
+    """``multiprocessing.util.spawnv_passfds`` with the child in a new session.
+
+    The same ``fork_exec`` call as CPython 3.11's, with ``call_setsid`` set.
+    """
+    import _posixsubprocess
+    import subprocess
+
+    passfds = tuple(sorted(map(int, passfds)))
+    errpipe_read, errpipe_write = os.pipe()
+    try:
+        return _posixsubprocess.fork_exec(
+            args, [path], True, passfds, None, None, -1, -1, -1, -1, -1, -1,
+            errpipe_read, errpipe_write, False, True, -1, None, None, None, -1, None,
+            subprocess._USE_VFORK)
+    finally:
+        os.close(errpipe_read)
+        os.close(errpipe_write)
+
+
+class _SessionPopen(popen_spawn_posix.Popen):
+    """The 'spawn' start method, the child in a session of its own (CPython 3.11)."""
+
+    def _launch(self, process_obj: Any) -> None:
+        if sys.version_info[:2] != (3, 11):     # fork_exec's arguments are 3.11's
+            super()._launch(process_obj)
+            return
+        with _SPAWN_LOCK:
+            original = mp_util.spawnv_passfds
+            mp_util.spawnv_passfds = _spawn_in_own_session
+            try:
+                super()._launch(process_obj)
+            finally:
+                mp_util.spawnv_passfds = original
+
+
+class _SessionProcess(mp_context.SpawnProcess):
+    @staticmethod
+    def _Popen(process_obj: Any) -> _SessionPopen:  # noqa: N802 - multiprocessing's name
+        return _SessionPopen(process_obj)
+
+
+class _SessionSpawnContext(mp_context.SpawnContext):
+    Process = _SessionProcess
+
+
+_SESSION_SPAWN = _SessionSpawnContext()
 
 
 def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> None:
@@ -66,15 +125,12 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
         :class:`~vbn_common.errors.VbnCommonError` when a worker died: in every case
         the workers are terminated and joined first.
     """
-    context = multiprocessing.get_context('spawn')
     results: list[Any] = []
     pool = None
     try:
-        # The workers are started with SIGINT ignored (inherited through exec, so a
-        # Ctrl-C while one still imports does not print its traceback).
-        with _sigint_ignored():
-            pool = context.Pool(workers, initializer=_start_worker,
-                                initargs=(initializer, initargs))
+        with _signals_deferred():
+            pool = _SESSION_SPAWN.Pool(workers, initializer=_start_worker,
+                                       initargs=(initializer, initargs))
         # multiprocessing.Pool replaces a worker that dies (the OOM killer, a crash in
         # OpenCV) and loses its task: the map would wait for ever. Watch the workers.
         workers_started = list(pool._pool)
@@ -111,53 +167,32 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
 
 
 @contextmanager
-def _sigint_ignored() -> Iterator[None]:
-    """Ignore SIGINT in the whole process for a moment (the workers' fork and exec).
+def _signals_deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back while the workers start; act on them afterwards.
 
-    The main thread uses :func:`signal.signal`; another thread (the builder node builds
-    in one) cannot, so there the disposition is saved and restored whole with libc's
-    ``sigaction`` (rclpy's own handler included). The pool's constructor returns once
-    the processes are started, a few milliseconds; a Ctrl-C in them is lost for the
-    workers only in the main thread; elsewhere the process ignores it too.
+    An interrupt raised while the parent hands a new worker its start-up data leaves
+    the worker reading a closed pipe (it printed an ``EOFError``). Only the main thread
+    can set handlers; elsewhere (the builder node) the node's own handler only flags
+    the shutdown, which the build acts on between images.
     """
-    if threading.current_thread() is threading.main_thread():
-        # Blocked as well as ignored: Linux keeps a blocked signal pending even while it
-        # is ignored, so a Ctrl-C in the window is raised here once it is unblocked.
-        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            yield
-        finally:
-            signal.signal(signal.SIGINT, previous)
-            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+    if threading.current_thread() is not threading.main_thread():
+        yield
         return
-    saved = _save_sigaction()
+    held: list[int] = []
+    signals = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, lambda signum, _frame: held.append(signum))
+                for s in signals}
     try:
         yield
     finally:
-        if saved is not None:
-            _libc().sigaction(signal.SIGINT, saved, None)
-
-
-def _libc() -> ctypes.CDLL:
-    return ctypes.CDLL(None, use_errno=True)
-
-
-def _save_sigaction() -> ctypes.Array | None:
-    """Set SIGINT to ignored; return the previous ``struct sigaction`` (None if unable)."""
-    try:
-        libc = _libc()
-        saved = ctypes.create_string_buffer(_SIGACTION_BYTES)
-        if libc.sigaction(signal.SIGINT, None, saved) != 0:
-            return None
-        ignore = ctypes.create_string_buffer(saved.raw, _SIGACTION_BYTES)
-        ctypes.memmove(ignore, ctypes.byref(ctypes.c_void_p(int(signal.SIG_IGN))),
-                       ctypes.sizeof(ctypes.c_void_p))    # sa_handler comes first
-        if libc.sigaction(signal.SIGINT, ignore, None) != 0:
-            return None
-        return saved
-    except (OSError, AttributeError):
-        return None
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if held:
+            handler = previous[held[0]]
+            if callable(handler):
+                handler(held[0], None)          # the command's own: raises
+            elif handler == signal.SIG_DFL:
+                os.kill(os.getpid(), held[0])
 
 
 @contextmanager
