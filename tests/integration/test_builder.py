@@ -52,7 +52,7 @@ def test_room_database_exports_and_validates(room_build, tmp_path: Path) -> None
     db = open_database(room_build['db'])
     assert db.info.pose_source == 'ground_truth'
     assert db.poses.n_poses == 200 and db.poses.spacing == pytest.approx(0.25, abs=1e-3)
-    assert (db.info.k, db.info.rho, db.info.sigma, db.info.algorithm) == (8, 1, 3, 'best')
+    assert (db.info.k, db.info.rho, db.info.sigma, db.info.algorithm) == (8, 1, 0, 'best')
     assert db.n_regions >= 3 and db.n_classes >= 100
     for region in db.regions:
         assert 2 <= len(region.model_views) <= 3

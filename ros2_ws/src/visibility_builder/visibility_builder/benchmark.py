@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from landmark_db.decomposition import decompose
+from landmark_db.decomposition import decompose, service
 from landmark_db.world import WorldInstance
 
 __all__ = ['BuildRun', 'FULL_FEATURE_BYTES', 'MemorySampler', 'SweepPoint', 'run_build',
@@ -151,8 +151,8 @@ class SweepPoint:
         k: Features per landmark.
         rho: Overlap radius.
         regions: Number of regions.
-        coverable: k-coverable poses.
-        covered: Of those, the poses some region contains.
+        coverable: k-coverable poses (rho-reduced, :mod:`landmark_db.decomposition.service`).
+        covered: Of those, the poses served (N_rho(v) inside one region).
         mean_region_poses: Mean region size.
         seconds: Decomposition time.
         decomposition: The regions themselves (for figures).
@@ -169,25 +169,20 @@ class SweepPoint:
 
     @property
     def coverage(self) -> float:
-        """Fraction of the k-coverable poses covered."""
+        """Served share of the k-coverable poses."""
         return self.covered / self.coverable if self.coverable else 0.0
 
 
 def sweep(world: WorldInstance, ks: Sequence[int], rhos: Sequence[int], algorithm: str,
           sigma: int, seed: int = 0) -> list[SweepPoint]:
     """Decompose ``world`` for every (k, rho) pair."""
-    per_pose = np.asarray(world.visible.sum(axis=1)).ravel()
     out = []
     for k in ks:
         for rho in rhos:
             result = decompose(world, algorithm, k, rho, sigma, rng=seed)
-            covered = np.zeros(world.n_poses, bool)
-            for region in result.regions:
-                covered[region.poses] = True
-            coverable = per_pose >= k
+            served = service(world, [region.poses for region in result.regions], k, rho)
             sizes = [r.poses.size for r in result.regions]
-            out.append(SweepPoint(k, rho, len(result.regions), int(coverable.sum()),
-                                  int((covered & coverable).sum()),
-                                  float(np.mean(sizes)) if sizes else 0.0, result.seconds,
-                                  result))
+            out.append(SweepPoint(k, rho, len(result.regions), served.k_coverable,
+                                  served.served, float(np.mean(sizes)) if sizes else 0.0,
+                                  result.seconds, result))
     return out

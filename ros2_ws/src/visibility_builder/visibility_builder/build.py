@@ -45,7 +45,7 @@ from landmark_db.database import (
     write_database,
 )
 from landmark_db.database.build_info import utc_now_iso
-from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose
+from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose, service
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
 from vbn_common.exploration import Exploration, ReadConfig, read_exploration
@@ -87,7 +87,7 @@ class DecompositionConfig:
     algorithm: str = 'best'
     k: int = 8
     rho: int = 1
-    sigma: int = 3
+    sigma: int = 0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -430,25 +430,29 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
         decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed)
     except LandmarkDbError as error:
         raise VisibilityBuilderError(str(error)) from None
-    coverable = int((per_pose >= dc.k).sum())
-    covered = np.zeros(sampling.n_poses, bool)
-    for region in decomposition.regions:
-        covered[region.poses] = True
-    stages.end(regions=len(decomposition.regions), k_coverable=coverable,
-               covered=int(covered[per_pose >= dc.k].sum()),
-               uncovered=int(decomposition.uncovered.size),
-               coverage=float(covered[per_pose >= dc.k].mean()) if coverable else 0.0,
+    served = service(world, [region.poses for region in decomposition.regions], dc.k, dc.rho)
+    bound = {} if decomposition.lower_bound is None else {
+        'lower_bound': decomposition.lower_bound,
+        'ratio_to_bound': round(len(decomposition.regions) / decomposition.lower_bound, 4)
+        if decomposition.lower_bound else None}
+    stages.end(regions=len(decomposition.regions), **served.to_dict(), **bound,
                mean_region_poses=float(np.mean([r.poses.size for r in decomposition.regions]))
                if decomposition.regions else 0.0)
+    if served.k_coverable == 0:
+        raise VisibilityBuilderError(
+            f'no pose is k-coverable: none sees k={dc.k} features throughout its '
+            f'rho={dc.rho} neighbourhood (lower --k or --rho)')
 
     stages.begin('model_views')
     database = _assemble(exploration, sampling, features, classes.labels, kept, visibility,
-                         decomposition, config, source or str(exploration.path))
+                         decomposition, world, config, source or str(exploration.path))
+    final = database.service(world)
     stages.end(regions=database.n_regions,
                regions_without_view=len(decomposition.regions) - database.n_regions,
                model_views=sum(len(r.model_views) for r in database.regions),
                extra_features=int(sum(r.extra.size for r in database.regions)),
-               descriptors=int(database.classes.descriptors.shape[0]))
+               descriptors=int(database.classes.descriptors.shape[0]),
+               served=final.served, served_share=round(final.share, 6))
 
     if db_path is not None:
         stages.begin('write', str(db_path))
@@ -470,7 +474,7 @@ def _check_output(path: Path) -> None:
 def _assemble(exploration: Exploration, sampling: PoseSampling,
               features: Sequence[ImageFeatures], pose_labels: Sequence[np.ndarray],
               kept: np.ndarray, visibility: sp.csr_matrix, decomposition: Decomposition,
-              config: BuildConfig, source: str) -> LandmarkDatabase:
+              world: WorldInstance, config: BuildConfig, source: str) -> LandmarkDatabase:
     frames = exploration.frames
     n_images = len(frames)
     # Database class numbering: position in ``kept``; a removed class becomes -1.
@@ -529,15 +533,13 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
         raise VisibilityBuilderError(
             'no region has an image that shows its whole landmark (several images per '
             'pose each see only part of it): try a smaller --k')
-    uncovered = decomposition.uncovered
     if dropped:
-        kept_cover = np.zeros(len(sampling.positions), bool)
-        for region in regions:
-            kept_cover[region.poses] = True
-        lost = np.concatenate([r.poses for r in dropped])
-        uncovered = np.union1d(uncovered, lost[~kept_cover[lost]]).astype(np.int64)
         _LOG.warning('%d of %d regions dropped: no image shows the whole landmark',
                      len(dropped), len(decomposition.regions))
+    # The poses the kept regions do not serve (more than the decomposition's when a
+    # region was dropped).
+    uncovered = service(world, [region.poses for region in regions], config.decomposition.k,
+                        config.decomposition.rho).unserved
 
     dc = config.decomposition
     info = BuildInfo(

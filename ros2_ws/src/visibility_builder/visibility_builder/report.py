@@ -2,7 +2,7 @@
 
 Written by ``vbn build --report DIR`` and by the builder node's ``report`` parameter:
 the regions over the floor plan (one colour per region, crosses on the k-coverable poses
-no region covers), poses per feature class before and after the filters (the thesis's
+the database does not serve), poses per feature class before and after the filters (the thesis's
 Figure 8.7) and every count and time of the build.
 """
 from __future__ import annotations
@@ -58,5 +58,6 @@ def write_report(folder: Path, result: Any, scene_name: str | None) -> None:
     summary['database'] = {'regions': len(db.regions), 'classes': db.classes.n_classes,
                            'poses': db.poses.n_poses, 'k': db.info.k, 'rho': db.info.rho,
                            'sigma': db.info.sigma, 'algorithm': db.info.algorithm,
-                           'pose_source': db.info.pose_source}
+                           'pose_source': db.info.pose_source,
+                           'service': db.service(result.world).to_dict()}
     write_text_atomic(folder / 'summary.json', json.dumps(summary, indent=2, default=str))

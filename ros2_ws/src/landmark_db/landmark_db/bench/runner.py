@@ -139,7 +139,7 @@ def run_world(task: tuple[Any, ...]) -> WorldOutcome:
         The records (in ``algorithms`` order) and, if ``keep``, the world and the
         decompositions.
     """
-    from landmark_db.decomposition import decompose, validate
+    from landmark_db.decomposition import decompose, service, validate
     from landmark_db.simulator.settings import get_setting, small_setting
     from landmark_db.simulator.simulate import simulate_world
 
@@ -156,7 +156,7 @@ def run_world(task: tuple[Any, ...]) -> WorldOutcome:
                 k=config.k, rho=config.rho, sigma=sigma, n_poses=world.n_poses,
                 n_edges=int(len(world.edges)), n_features=world.n_features,
                 mean_visible=float(counts.mean()) if counts.size else 0.0,
-                n_coverable=int(np.count_nonzero(counts >= config.k)))
+                n_coverable=service(world, [], config.k, config.rho).k_coverable)
     records = []
     kept: dict[str, Any] = {}
     for algorithm in algorithms:
@@ -185,7 +185,9 @@ def run_world(task: tuple[Any, ...]) -> WorldOutcome:
         record.regions = len(sizes)
         record.mean_region_poses = float(np.mean(sizes)) if sizes else 0.0
         record.used_features = len(used)
-        record.uncovered = int(len(decomposition.uncovered))
+        served = service(world, [region.poses for region in decomposition.regions],
+                         config.k, config.rho)
+        record.uncovered = int(served.unserved.size)
         record.seconds = float(decomposition.seconds)
         record.problems = list(validate(world, decomposition))
         record.valid = not record.problems

@@ -14,8 +14,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help='summarise a landmark database: regions, features, poses, sizes, parameters',
         description='Check a landmark database (application id, schema version, SQLite '
                     'integrity) and print how many regions, feature classes, poses and '
-                    'model views it holds, the bytes each table takes and the parameters it '
-                    'was built with. Exits 2 with one line for a missing, foreign, newer or '
+                    'model views it holds, its service (the k-coverable poses whose '
+                    'rho-neighbourhood lies inside one region, measured on the stored '
+                    'world), the bytes each table takes and the parameters it was built '
+                    'with. Exits 2 with one line for a missing, foreign, newer or '
                     'damaged file.',
     )
     parser.add_argument('database', metavar='DB', help='landmark database (SQLite file)')
@@ -28,13 +30,16 @@ def run(args: argparse.Namespace) -> int:
     """Print the summary of the database."""
     import json
 
-    from landmark_db.database import database_summary
+    from landmark_db.database import database_summary, open_database
 
     summary = database_summary(args.database)
+    data = summary.to_dict()
+    # Service is measured on the stored world, not read from a stored count.
+    data['service'] = open_database(args.database).service().to_dict()
     if args.json:
-        print(json.dumps(summary.to_dict(), indent=2, sort_keys=True))
+        print(json.dumps(data, indent=2, sort_keys=True))
     else:
-        print(format_summary(summary.to_dict()))
+        print(format_summary(data))
     return 0
 
 
@@ -67,7 +72,8 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"descriptors, {counts['visibility']} pose-class sightings",
         f"  poses:       {counts['poses']}, {counts['edges']} edges"
         + (f', spacing {spacing:g} m' if spacing is not None else '')
-        + f", {counts['uncovered']} k-coverable poses uncovered",
+        + f", {counts['uncovered']} listed as uncovered",
+        f"  service:     {_service(summary.get('service'))}",
         f"  model views: {counts['model_views']} with {counts['model_view_features']} "
         f'features',
         f"  camera:      {camera['kind']} {camera['width']} x {camera['height']}, "
@@ -85,6 +91,14 @@ def format_summary(summary: dict[str, Any]) -> str:
             shown += f', {len(rest)} more tables {_size(sum(n for _, n in rest))}'
         lines.append('  sizes:       ' + shown)
     return '\n'.join(lines)
+
+
+def _service(figures: dict[str, Any] | None) -> str:
+    if not figures:
+        return '(not measured)'
+    return (f"served {figures['served']} of {figures['k_coverable']} k-coverable poses "
+            f"({100.0 * figures['served_share']:.1f} %; N_rho(v) inside one region), "
+            f"{figures['in_region']} lie in a region")
 
 
 def _pairs(values: dict[str, Any]) -> str:

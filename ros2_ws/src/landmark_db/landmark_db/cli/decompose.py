@@ -5,7 +5,17 @@ import argparse
 
 from landmark_db.defaults import DECOMPOSITION
 
-__all__ = ['register', 'run']
+__all__ = ['bound_line', 'register', 'run']
+
+
+def bound_line(regions: int, bound: int, unserved: int) -> str:
+    """One line: the certified bound and the decomposition's ratio to it."""
+    ratio = regions / bound if bound else float('inf') if regions else 1.0
+    line = (f'lower bound: no complete decomposition has fewer than {bound} regions; '
+            f'{regions} / {bound} = {ratio:.3f}')
+    if unserved:
+        line += f' (this one leaves {unserved} k-coverable poses unserved)'
+    return line
 
 _ALGORITHMS = ('A1', 'A2', 'A3', 'B1', 'B2', 'C', 'exact', 'best')
 
@@ -44,6 +54,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='set-cover solver time limit for exact (default '
                              f'{DECOMPOSITION.exact_time_limit:g}) and best (default '
                              f'{DECOMPOSITION.best_time_limit:g})')
+    parser.add_argument('--bound', action='store_true',
+                        help='also certify a lower bound on the fewest regions (column '
+                             'generation; best at sigma 0 always does) and print the ratio')
     parser.add_argument('--out', required=True, metavar='DECOMP.json',
                         help='decomposition JSON to write')
     parser.set_defaults(func=run)
@@ -54,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
     import math
 
     from landmark_db.atomic import check_output_folder
-    from landmark_db.decomposition import decompose, save_decomposition
+    from landmark_db.decomposition import certify, decompose, save_decomposition, service
     from landmark_db.errors import LandmarkDbError
     from landmark_db.world import load_world
 
@@ -78,10 +91,15 @@ def run(args: argparse.Namespace) -> int:
     world = load_world(args.world)
     decomposition = decompose(world, args.algorithm, args.k, args.rho, args.sigma,
                               alpha=args.alpha, rng=args.seed, **options)
+    if args.bound and decomposition.lower_bound is None:
+        decomposition.lower_bound = certify(world, decomposition).regions
     save_decomposition(decomposition, args.out)
     sizes = [len(region) for region in decomposition.regions]
     mean = sum(sizes) / len(sizes) if sizes else 0.0
+    served = service(world, [region.poses for region in decomposition.regions],
+                     decomposition.k, decomposition.rho)
     print(f'{args.algorithm}: {len(sizes)} regions (mean {mean:.1f} poses), '
-          f'{decomposition.uncovered.size} k-coverable poses uncovered, '
-          f'{decomposition.seconds:.3f} s -> {args.out}')
+          f'{served.describe()}, {decomposition.seconds:.3f} s -> {args.out}')
+    if decomposition.lower_bound is not None:
+        print(bound_line(len(sizes), decomposition.lower_bound, served.unserved.size))
     return 0

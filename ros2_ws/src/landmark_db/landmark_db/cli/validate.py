@@ -24,7 +24,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Validate; print the verdict and every problem found."""
-    from landmark_db.decomposition import load_decomposition, validate
+    from landmark_db.decomposition import load_decomposition, service, validate
     from landmark_db.world import load_world
 
     world = load_world(args.world)
@@ -35,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
         for problem in problems:
             print(f'  - {problem}')
         return 1
+    served = service(world, [region.poses for region in decomposition.regions],
+                     decomposition.k, decomposition.rho)
     print(f'valid: {len(decomposition.regions)} regions, k = {decomposition.k}, '
-          f'rho = {decomposition.rho}, sigma = {decomposition.sigma}, '
-          f'{decomposition.uncovered.size} k-coverable poses uncovered')
+          f'rho = {decomposition.rho}, sigma = {decomposition.sigma}, {served.describe()}')
     return 0

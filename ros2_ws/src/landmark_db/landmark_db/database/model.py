@@ -57,7 +57,7 @@ from landmark_db.database.fields import (
     read_only,
     set_field,
 )
-from landmark_db.decomposition import Decomposition, Region
+from landmark_db.decomposition import Decomposition, Region, Service, service
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance, adjacency_matrix
 
@@ -495,6 +495,15 @@ class LandmarkDatabase(ArrayEquality):
             self.poses.xy, self.poses.edges, self.classes.visibility,
             feature_ids=np.arange(self.n_classes, dtype=np.int64),
             spacing=self.poses.spacing, name=name)
+
+    def service(self, world: WorldInstance | None = None) -> Service:
+        """Return the service of the stored regions (:mod:`landmark_db.decomposition.service`).
+
+        Args:
+            world: this database's world instance if the caller has it already.
+        """
+        return service(world if world is not None else self.to_world_instance(),
+                       [region.poses for region in self.regions], self.info.k, self.info.rho)
 
     def to_decomposition(self) -> Decomposition:
         """Return the decomposition record (region landmarks as feature ids = class ids)."""

@@ -12,13 +12,16 @@ B1 B2    shrink regions until k features (Fig. 5.2)  :mod:`.shrink_regions`
 C        neighbourhood-seeded regions (Figure 5.3)   :mod:`.neighbourhood_seeds`
 exact    optimum by set cover + HiGHS MILP           :mod:`.exact`
 best     candidate pool + set cover (new heuristic)  :mod:`.best`
+(bound)  certified lower bound by column generation  :mod:`.bound`
 ======== =========================================== ==============================
 
 Every algorithm returns a list of :class:`~.problem.ZeroRegion` (poses and landmark
 columns on the reduced instance). Shared rules (sigma rule of Section 5.5,
 disconnected pieces, ties) live in :mod:`.problem`; redundancy elimination
 (Section 5.4) in :mod:`.redundancy`; the minimum set cover used by exact and best in
-:mod:`.set_cover`; the validator in :mod:`.validate`.
+:mod:`.set_cover`; the validator in :mod:`.validate`; the one coverage measure
+(*service*: k-coverable poses whose rho-neighbourhood lies in one region) in
+:mod:`.service`.
 """
 from __future__ import annotations
 
@@ -29,18 +32,16 @@ from typing import Any
 
 import numpy as np
 
+from landmark_db.decomposition.bound import LowerBound, lower_bound
 from landmark_db.decomposition.model import (
     Decomposition,
     Region,
     load_decomposition,
     save_decomposition,
 )
-from landmark_db.decomposition.overlap import (
-    covered_poses,
-    expand_region,
-    neighbourhood_matrix,
-)
+from landmark_db.decomposition.overlap import expand_region, neighbourhood_matrix
 from landmark_db.decomposition.problem import ZeroProblem, ZeroRegion, zero_problem
+from landmark_db.decomposition.service import Service, service
 from landmark_db.decomposition.validate import validate
 from landmark_db.defaults import DECOMPOSITION
 from landmark_db.errors import LandmarkDbError
@@ -49,10 +50,14 @@ from landmark_db.world import WorldInstance
 __all__ = [
     'ALGORITHMS',
     'Decomposition',
+    'LowerBound',
     'Region',
+    'Service',
+    'certify',
     'decompose',
     'load_decomposition',
     'save_decomposition',
+    'service',
     'validate',
 ]
 
@@ -109,28 +114,52 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = DECOMPOSI
         DECOMPOSITION.seed if rng is None else rng)
     start = time.perf_counter()
     problem = zero_problem(world, k, rho, sigma, generator)
-    reduced = _run(problem, algorithm, float(alpha), options) if problem.coverable.any() \
-        else []
+    certificate: dict[str, Any] = {}
+    reduced = _run(problem, algorithm, float(alpha), options, certificate) \
+        if problem.coverable.any() else []
     hood = neighbourhood_matrix(world.adjacency, rho) if rho else None
     regions = []
     for region in reduced:
         expanded = expand_region(hood, region.poses) if hood is not None else region.poses
         regions.append(Region(expanded, world.feature_ids[np.sort(region.columns)]))
-    if hood is None:
-        covered = np.zeros(world.n_poses, dtype=bool)
-        for region in regions:
-            covered[region.poses] = True
-    else:
-        covered = covered_poses(hood, [region.poses for region in regions])
-    uncovered = np.flatnonzero(problem.coverable & ~covered)
+    uncovered = service(world, [region.poses for region in regions], k, rho,
+                        coverable=problem.coverable, neighbourhoods=hood).unserved
     seconds = time.perf_counter() - start
     _LOG.debug('%s: %d regions, %d uncovered, %.3f s', algorithm, len(regions),
                uncovered.size, seconds)
-    return Decomposition(algorithm, k, rho, sigma, seconds, regions, uncovered)
+    bound = certificate.get('bound')
+    if algorithm == 'exact':
+        lower = len(regions)  # proven optimal
+    else:
+        lower = bound.regions if bound is not None else None
+    return Decomposition(algorithm, k, rho, sigma, seconds, regions, uncovered, lower)
+
+
+def certify(world: WorldInstance, decomposition: Decomposition,
+            **limits: Any) -> LowerBound:
+    """Bound the regions of any complete decomposition of ``world`` from below.
+
+    The decomposition's landmarks seed the pool of :func:`.bound.lower_bound`, which
+    prices more candidates until the LP relaxation is solved (or its limits stop it;
+    the bound is valid either way).
+
+    Args:
+        world: the world instance.
+        decomposition: any decomposition of it (its k and rho are used).
+        **limits: ``max_rounds``, ``node_limit`` of :func:`.bound.lower_bound`.
+    """
+    problem = zero_problem(world, decomposition.k, decomposition.rho, 0,
+                           np.random.default_rng(DECOMPOSITION.seed))
+    pool = []
+    for region in decomposition.regions:
+        known = np.isin(region.features, world.feature_ids)
+        if region.features.size == decomposition.k and known.all():
+            pool.append(ZeroRegion(region.poses, world.columns_of(region.features)))
+    return lower_bound(problem, pool, **limits)
 
 
 def _run(problem: ZeroProblem, algorithm: str, alpha: float,
-         options: dict[str, Any]) -> list[ZeroRegion]:
+         options: dict[str, Any], certificate: dict[str, Any]) -> list[ZeroRegion]:
     if algorithm in ('A1', 'A2', 'A3'):
         from landmark_db.decomposition.grow_regions import grow_regions
         return grow_regions(problem, algorithm)
@@ -144,7 +173,7 @@ def _run(problem: ZeroProblem, algorithm: str, alpha: float,
         from landmark_db.decomposition.exact import exact_cover
         return exact_cover(problem, **options)
     from landmark_db.decomposition.best import best_cover
-    return best_cover(problem, alpha=alpha, **options)
+    return best_cover(problem, alpha=alpha, certificate=certificate, **options)
 
 
 def _check_int(value: Any, name: str, least: int) -> int:

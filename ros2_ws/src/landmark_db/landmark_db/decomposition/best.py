@@ -5,11 +5,13 @@ cover by maximal candidate regions, the connected components of {v : L subset of
 Enumerating all of them is hopeless on large worlds, but a good *pool* of them plus a
 set-cover solver beats one greedy pass:
 
-1. **Reference and pool.** Run B.2 and B.1 (Section 5.3) on the same 0-MORDP
-   instance (and B.2 with sigma = 0 when sigma > 0, so that every k-coverable pose
-   lies in some candidate); all their regions (maximal components for their
-   landmarks) start the pool. B.2's result is the reference: ``best`` may leave at
-   most as many k-coverable poses uncovered as B.2 does (none when sigma = 0).
+1. **Reference and pool.** Run A.1, A.2, A.3, B.1, B.2 and C (Sections 5.2, 5.3) on
+   the same 0-MORDP instance (and B.2 with sigma = 0 when sigma > 0, so that every
+   k-coverable pose lies in some candidate); every region they return, widened to its
+   maximal candidate (the component of {v : L subset of F_v} holding it), starts the
+   pool. The reference is the algorithm serving the most poses (then: fewest
+   regions): ``best`` may leave at most as many k-coverable poses unserved as it does
+   (none when sigma = 0).
 2. **Seeded greedy candidates.** Repeatedly take the k-coverable pose lying in the
    fewest candidates (ties: seeded priority) and grow candidates around it: for radii
    t of one half, one and two times the typical radius of the pool's regions,
@@ -26,23 +28,30 @@ set-cover solver beats one greedy pass:
    coverage-gaining swap moves) improves the result within the budget.
 4. **Merge rounds.** For every two touching chosen regions, a candidate aimed at the
    poses only they cover is added, and the local search is repeated.
-5. The redundancy elimination of Section 5.4, then regions covering at most sigma
+5. **Pricing** (sigma = 0, worlds up to ``PRICING_MAX_POSES`` poses): column
+   generation (:mod:`.bound`) adds the candidates the cover's LP relaxation prices
+   above 1 and a last set cover runs over the grown pool; the certified lower bound
+   it proves is returned in ``certificate``.
+6. The redundancy elimination of Section 5.4, then regions covering at most sigma
    poses alone are dropped while the budget allows (the sigma rule, Section 5.5, read
-   on the final set). If the result were ever worse than B.2, B.2's is returned.
+   on the final set). If any single algorithm's result serves as many poses with
+   fewer regions, that result is returned.
 
 Every region is a connected component seeing its k landmark features, so the output
-is valid by construction, and it never has more regions or more uncovered k-coverable
-poses than B.2.
+is valid by construction, and it never has more regions, nor more unserved
+k-coverable poses, than any of A.1 to C that serves as many.
 """
 from __future__ import annotations
 
 from dataclasses import replace
 import logging
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from landmark_db.decomposition.bound import lower_bound
 from landmark_db.decomposition.problem import (
     ZeroProblem,
     ZeroRegion,
@@ -73,40 +82,56 @@ COVER_NODES = 2000  # the complete cover (sigma = 0): usually solved at the root
 # reaches an optimal vertex in about half the interior-point method's time (with
 # crossover). Which optimal vertex changes the start, not the quality on average.
 LP_METHOD = 'highs-ds'
+# Column generation: rounds and branch-and-bound nodes per pricing round.
+PRICING_ROUNDS = 40
+PRICING_NODES = 600_000  # over all rounds
+# Pricing searches bitsets over every pose; past this many poses a round costs
+# seconds and proves little, so best skips it (vbn decompose --bound still runs it).
+PRICING_MAX_POSES = 1000
 
 
 def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
                time_limit: float = DECOMPOSITION.best_time_limit, multiplicity: int = 5,
                max_seeds: int | None = None, merge_rounds: int = 3,
-               ) -> list[ZeroRegion]:
+               pricing_rounds: int = PRICING_ROUNDS, pricing_nodes: int = PRICING_NODES,
+               certificate: dict[str, Any] | None = None) -> list[ZeroRegion]:
     """Run the ``best`` heuristic on a 0-MORDP instance.
 
     Args:
         problem: the reduced instance.
-        alpha: algorithm C's alpha; accepted for a uniform interface and unused
-            (C's regions no longer seed the pool: the seeded candidates cover what
-            they added, and C cost a fifth of the run time).
+        alpha: algorithm C's alpha (C's regions join the pool).
         time_limit: seconds for each set-cover MILP.
         multiplicity: stop seeding once every k-coverable pose lies in this many
             candidates.
         max_seeds: most seeds to grow candidates from; default ``n_poses // 4``.
         merge_rounds: rounds of merge candidates plus local search after the cover.
+        pricing_rounds: column-generation rounds (:mod:`.bound`) that grow the pool
+            with the candidates the cover's LP relaxation prices best, before a last
+            set cover (sigma = 0 only; 0 skips them).
+        pricing_nodes: branch-and-bound nodes over all pricing rounds.
+        certificate: if given, receives ``'bound'``, the certified
+            :class:`~.bound.LowerBound` the pricing proved (sigma = 0 only).
 
     Returns:
         The regions.
     """
     n = problem.n_poses
     coverable = problem.coverable
-    reference = shrink_regions(problem, 'B2')
+    cache = _ComponentCache(problem)
+    results = _every_algorithm(problem, alpha)
+    # The reference: the algorithm serving the most poses (then: fewest regions). best
+    # leaves at most as many k-coverable poses unserved as it does.
+    reference = min(results.values(),
+                    key=lambda regions: (_uncovered_count(regions, coverable), len(regions)))
     budget = _uncovered_count(reference, coverable)
     pool = _Pool(n)
-    pool.reference = [pool.add(region) for region in reference]
-    extra = shrink_regions(problem, 'B1')
+    pool.reference = [pool.add(cache.maximal(region)) for region in reference]
+    for regions in results.values():
+        for region in regions:
+            pool.add(cache.maximal(region))
     if problem.sigma:
-        extra += shrink_regions(replace(problem, sigma=0), 'B2')
-    for region in extra:
-        pool.add(region)
-    cache = _ComponentCache(problem)
+        for region in shrink_regions(replace(problem, sigma=0), 'B2'):
+            pool.add(region)
     _add_seeded_candidates(problem, pool, cache, multiplicity, max_seeds)
 
     required = np.flatnonzero(coverable)
@@ -126,17 +151,71 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
                 break
             chosen = improved
     except LandmarkDbError as error:
-        _LOG.warning('best: set cover failed (%s); keeping B.2', error)
+        _LOG.warning('best: set cover failed (%s); keeping the reference', error)
         return reference
     if chosen is None:
         return reference
+    if problem.sigma == 0 and pricing_rounds > 0 and n <= PRICING_MAX_POSES:
+        chosen = _priced_cover(problem, pool, required, chosen, time_limit, pricing_rounds,
+                               pricing_nodes, certificate)
     regions = [ZeroRegion(pool.poses[i], pool.landmarks[i]) for i in chosen]
     regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
     _LOG.debug('best: %d candidates, %d regions (%d uncovered); B.2 %d (%d)', len(pool.poses),
                len(regions), _uncovered_count(regions, coverable), len(reference), budget)
-    if len(regions) > len(reference) or _uncovered_count(regions, coverable) > budget:
-        return reference
+    # Never worse than any algorithm serving as many poses (the pool holds their regions,
+    # so this only guards against a set cover stopped at its node limit).
+    for regions_of in results.values():
+        if _uncovered_count(regions_of, coverable) <= _uncovered_count(regions, coverable) \
+                and len(regions_of) < len(regions):
+            regions = regions_of
     return regions
+
+
+def _priced_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray,
+                  chosen: np.ndarray, time_limit: float, rounds: int, nodes: int,
+                  certificate: dict[str, Any] | None) -> np.ndarray:
+    """Grow the pool by column generation, then cover again; keep the smaller cover."""
+    columns: list[ZeroRegion] = []
+    bound = lower_bound(problem, [ZeroRegion(poses, landmark) for poses, landmark
+                                  in zip(pool.poses, pool.landmarks)],
+                        max_rounds=rounds, node_limit=min(nodes, 50_000), total_nodes=nodes,
+                        columns_out=columns)
+    if certificate is not None:
+        certificate['bound'] = bound
+    before = len(pool.poses)
+    for region in columns:
+        pool.add(region)
+    if len(pool.poses) == before or chosen.size <= bound.regions:
+        return chosen
+    try:
+        again, _ = solve_set_cover(problem.n_poses, required, pool.poses, time_limit,
+                                   node_limit=COVER_NODES)
+    except LandmarkDbError:
+        return chosen
+    return again if again.size < chosen.size else chosen
+
+
+def _every_algorithm(problem: ZeroProblem, alpha: float) -> dict[str, list[ZeroRegion]]:
+    """Run A.1, A.2, A.3, B.1, B.2 and C on the instance.
+
+    Each gets its own copy of the tie-breaking generator, so that each gives what it
+    gives alone with that seed.
+    """
+    from landmark_db.decomposition.grow_regions import grow_regions
+    from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
+
+    state = problem.rng.bit_generator.state
+    results = {}
+    for name, run in (('B2', lambda p: shrink_regions(p, 'B2')),
+                      ('B1', lambda p: shrink_regions(p, 'B1')),
+                      ('A1', lambda p: grow_regions(p, 'A1')),
+                      ('A2', lambda p: grow_regions(p, 'A2')),
+                      ('A3', lambda p: grow_regions(p, 'A3')),
+                      ('C', lambda p: neighbourhood_seeds(p, alpha))):
+        generator = np.random.Generator(type(problem.rng.bit_generator)())
+        generator.bit_generator.state = state
+        results[name] = run(replace(problem, rng=generator, _scratch=None))
+    return results
 
 
 def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budget: int,
@@ -427,6 +506,14 @@ class _ComponentCache:
         self._pieces: dict[bytes, list[np.ndarray]] = {}
         # float64 adjacency: csgraph would otherwise convert the bool matrix per call.
         self.graph = sp.csr_matrix(problem.adjacency, dtype=np.float64)
+
+    def maximal(self, region: ZeroRegion) -> ZeroRegion:
+        """Return the maximal candidate holding ``region``.
+
+        Same landmark, all of its component of {v : L subset of F_v}.
+        """
+        landmark = np.sort(np.asarray(region.columns, dtype=np.int64))
+        return ZeroRegion(self.component(landmark, int(region.poses[0])), landmark)
 
     def component(self, landmark: np.ndarray, seed: int) -> np.ndarray:
         """Return the component holding ``seed`` (which must see all of ``landmark``)."""

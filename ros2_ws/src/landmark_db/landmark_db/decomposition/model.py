@@ -5,7 +5,8 @@ Decomposition JSON (fixed; other tools depend on it)::
     {
       "algorithm": "B2", "k": 4, "rho": 1, "sigma": 9, "seconds": 0.21,
       "regions": [{"poses": [pose indices], "features": [the k landmark feature ids]}],
-      "uncovered": [k-coverable pose indices left uncovered]
+      "uncovered": [k-coverable pose indices left uncovered],
+      "lower_bound": 31   (optional: no complete decomposition has fewer regions)
     }
 """
 from __future__ import annotations
@@ -58,6 +59,9 @@ class Decomposition:
         uncovered: sorted pose indices of k-coverable poses (judged on the
             rho-reduced visibility sets) that no region covers with its whole
             rho-neighbourhood.
+        lower_bound: a certified lower bound on the regions of any complete
+            decomposition of the same world, k and rho (:mod:`.bound`), when one was
+            computed (``best`` at sigma = 0 does); JSON key ``lower_bound``, optional.
     """
 
     algorithm: str
@@ -67,13 +71,14 @@ class Decomposition:
     seconds: float
     regions: list[Region] = field(default_factory=list)
     uncovered: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    lower_bound: int | None = None
 
     def __post_init__(self) -> None:
         self.uncovered = np.asarray(self.uncovered, dtype=np.int64).reshape(-1)
 
     def to_dict(self) -> dict[str, Any]:
         """Return the decomposition JSON structure."""
-        return {
+        data = {
             'algorithm': self.algorithm,
             'k': int(self.k),
             'rho': int(self.rho),
@@ -83,6 +88,9 @@ class Decomposition:
                         for r in self.regions],
             'uncovered': self.uncovered.tolist(),
         }
+        if self.lower_bound is not None:
+            data['lower_bound'] = int(self.lower_bound)
+        return data
 
     @staticmethod
     def from_dict(data: Any) -> Decomposition:
@@ -118,8 +126,13 @@ class Decomposition:
             regions.append(Region(_int_list(raw['poses'], f'regions[{i}].poses'),
                                   _int_list(raw['features'], f'regions[{i}].features')))
         uncovered = _int_list(data['uncovered'], 'uncovered')
+        bound = data.get('lower_bound')
+        if bound is not None and (isinstance(bound, bool) or not isinstance(bound, int)
+                                  or bound < 0):
+            raise LandmarkDbError(f"decomposition 'lower_bound' must be a non-negative "
+                                  f'integer, got {bound!r}')
         return Decomposition(data['algorithm'], ints['k'], ints['rho'], ints['sigma'],
-                             float(seconds), regions, uncovered)
+                             float(seconds), regions, uncovered, bound)
 
 
 def load_decomposition(path: str | Path) -> Decomposition:

@@ -7,9 +7,9 @@ A decomposition is valid when:
 * it lists exactly k distinct landmark feature ids, every one seen from every pose of
   the region (so at least k features are common to the region);
 * every k-coverable pose (judged on the rho-reduced sets F~_v of Theorem 4.1 when
-  rho > 0) is covered, i.e. has its whole N_rho(v) inside one region (Definition 3.7,
-  the rho-overlap property), unless it is listed in ``uncovered``;
-* every pose listed in ``uncovered`` is k-coverable and really not covered;
+  rho > 0) is served, i.e. has its whole N_rho(v) inside one region (Definition 3.7,
+  the rho-overlap property; :mod:`.service`), unless it is listed in ``uncovered``;
+* every pose listed in ``uncovered`` is k-coverable and really not served;
 * when sigma = 0, ``uncovered`` is empty (every algorithm here promises a complete
   decomposition then).
 """
@@ -18,13 +18,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse import csgraph
 
-from landmark_db.decomposition.coverable import coverable_poses
 from landmark_db.decomposition.model import Decomposition
-from landmark_db.decomposition.overlap import (
-    covered_poses,
-    neighbourhood_matrix,
-    reduce_visibility,
-)
+from landmark_db.decomposition.service import service
 from landmark_db.world import WorldInstance
 
 __all__ = ['validate']
@@ -103,9 +98,8 @@ def validate(world: WorldInstance, decomposition: Decomposition) -> list[str]:
         return problems
     if np.unique(uncovered).size != uncovered.size:
         problems.append('uncovered lists a pose twice')
-    reduced = world.visible if rho == 0 else reduce_visibility(adjacency, world.visible, rho)
-    coverable = coverable_poses(reduced, k)
-    covered = covered_poses(neighbourhood_matrix(adjacency, rho), good_regions)
+    measured = service(world, good_regions, k, rho)
+    coverable, covered = measured.coverable_mask, measured.served_mask
     listed = np.zeros(n, dtype=bool)
     listed[uncovered] = True
     missing = np.flatnonzero(coverable & ~covered & ~listed)

@@ -33,7 +33,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--k', type=int, default=None, help='features per landmark (8)')
     parser.add_argument('--rho', type=int, default=None, help='overlap radius, graph steps (1)')
     parser.add_argument('--sigma', type=int, default=None,
-                        help='least newly covered poses of a region (3)')
+                        help='a region must serve more than SIGMA poses no other serves (0, '
+                             'the default: every k-coverable pose is served)')
     parser.add_argument('--algorithm', default=None,
                         help='decomposition algorithm: A1 A2 A3 B1 B2 C exact best (best)')
     parser.add_argument('--workers', type=int, default=None,

@@ -1,0 +1,318 @@
+"""A certified lower bound on the fewest regions (new; where :mod:`.exact` cannot enumerate).
+
+An optimum 0-MORDP decomposition is a minimum set cover of the k-coverable poses by
+the maximal candidate regions (:mod:`.exact`): the connected components of
+{v : L subset of F~_v} over the k-subsets L. On built worlds there are far too many
+to list (about 1.8e11 candidate landmarks on the room), so the bound works on the
+linear relaxation of that cover and never lists them:
+
+1. **Restricted master.** The LP relaxation min sum x_S, sum_{S containing v} x_S >= 1
+   over a pool of candidates (the decomposition's own landmarks and their components)
+   is solved with HiGHS (``scipy.optimize.linprog``); its duals y_v >= 0 price the poses.
+2. **Pricing** (column generation): the candidate S maximising y(S) = sum over v in S
+   of y_v. The search runs over *supports* P(L) = {v : L subset of F~_v}, bitsets
+   intersected one feature at a time; a support can only shrink as L grows, so its
+   weight bounds everything below it, and so does the (k - |closure|)-th heaviest of
+   its one-feature cuts, since a candidate below needs that many more features seen
+   from all its poses (branch and bound). A support whose *closure* (the features all
+   its poses see) holds k features has its connected components as candidates and
+   nothing below it weighs more. Candidates with y(S) > 1 join the pool and the
+   master is solved again.
+3. **Certificate.** For any duals y and any U >= max_S y(S) over *all* candidates,
+   y / U is feasible for the dual of the full LP, so sum(y) / U is a lower bound on the
+   LP optimum and its ceiling one on the optimum decomposition (weak duality; the
+   Lagrangian bound of Farley, "A note on bounding a class of linear programming
+   problems", Oper. Res. 38(5), 1990). When a search stops at its node limit, the
+   weights of its open nodes enter U, so the bound stays valid however early it stops.
+
+Under rho > 0 the bound is computed on the reduced instance (Theorem 4.1), whose
+optimum equals that of rho-MORDP (Theorem 4.2). The bound is for a *complete*
+decomposition (every k-coverable pose served), as the exact optimum is.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+import time
+
+import numpy as np
+from scipy.optimize import linprog
+import scipy.sparse as sp
+
+from landmark_db.decomposition.problem import (
+    ZeroProblem,
+    ZeroRegion,
+    component_of,
+    split_components,
+)
+from landmark_db.decomposition.set_cover import cover_matrix, merge_identical_rows
+from landmark_db.errors import LandmarkDbError
+
+__all__ = ['LowerBound', 'lower_bound']
+
+_EPS = 1e-9
+
+
+@dataclass(frozen=True)
+class LowerBound:
+    """A certified lower bound on the fewest regions of a complete decomposition.
+
+    Attributes:
+        regions: the bound, an integer: no complete decomposition has fewer regions.
+        lp_value: the restricted master's LP optimum at the last round (an upper bound
+            on the full LP's optimum).
+        lp_bound: sum(y) / U, the certified lower bound on the full LP's optimum.
+        columns: candidates in the final pool.
+        rounds: pricing rounds run.
+        proven: True when the last pricing round found no candidate with y(S) > 1
+            (the LP relaxation is then solved exactly: ``lp_bound == lp_value``).
+        seconds: wall-clock time.
+    """
+
+    regions: int
+    lp_value: float
+    lp_bound: float
+    columns: int
+    rounds: int
+    proven: bool
+    seconds: float
+
+    def ratio(self, regions: int) -> float:
+        """Return a decomposition's region count over the bound (1.0 is optimal)."""
+        return regions / self.regions if self.regions else float('inf') if regions else 1.0
+
+
+def lower_bound(problem: ZeroProblem, pool: list[ZeroRegion], max_rounds: int = 40,
+                node_limit: int = 50_000, total_nodes: int = 400_000,
+                columns_out: list[ZeroRegion] | None = None) -> LowerBound:
+    """Bound the fewest regions of a complete decomposition of ``problem`` from below.
+
+    Args:
+        problem: the 0-MORDP instance.
+        pool: starting candidates (any regions seeing their landmark; each is widened
+            to its maximal candidate).
+        max_rounds: most pricing rounds.
+        node_limit: most branch-and-bound nodes per pricing round (limits, not
+            seconds, keep the result the same on any machine).
+        total_nodes: most nodes over all rounds; no round starts past it.
+        columns_out: if given, receives every candidate of the final pool (maximal
+            candidates, each with its landmark), for a set cover over them.
+
+    Returns:
+        The bound.
+
+    Raises:
+        LandmarkDbError: when some k-coverable pose lies in no candidate at all.
+    """
+    start = time.perf_counter()
+    required = np.flatnonzero(problem.coverable)
+    if required.size == 0:
+        return LowerBound(0, 0.0, 0.0, 0, 0, True, time.perf_counter() - start)
+    columns = _Columns(problem)
+    for region in pool:
+        columns.add_landmark(region.columns)
+    columns.fill(required)
+    rounds, proven, spent = 0, False, 0
+    lp_value, lp_bound = 0.0, 0.0
+    while True:
+        lp_value, duals = _master(problem, required, columns.poses)
+        total = float(duals.sum())
+        found, upper, proven, used = _price(problem, duals,
+                                            min(node_limit, total_nodes - spent))
+        spent += used
+        rounds += 1
+        lp_bound = max(lp_bound, total / upper)
+        added = sum(columns.add(region) for region in found)
+        if proven or not added:
+            break
+        if rounds >= max_rounds or spent >= total_nodes:
+            break
+    if columns_out is not None:
+        columns_out.extend(columns.regions)
+    return LowerBound(int(math.ceil(lp_bound - 1e-6)), lp_value, lp_bound,
+                      len(columns.poses), rounds, proven, time.perf_counter() - start)
+
+
+class _Columns:
+    """The master's candidate pool: distinct maximal candidates."""
+
+    def __init__(self, problem: ZeroProblem) -> None:
+        self.problem = problem
+        self.poses: list[np.ndarray] = []
+        self.regions: list[ZeroRegion] = []
+        self._seen: set[bytes] = set()
+        self._landmarks: set[bytes] = set()
+
+    def add(self, region: ZeroRegion) -> bool:
+        key = region.poses.tobytes()
+        if key in self._seen:
+            return False
+        self._seen.add(key)
+        self.poses.append(region.poses)
+        self.regions.append(region)
+        return True
+
+    def add_landmark(self, columns: np.ndarray) -> None:
+        landmark = np.sort(np.asarray(columns, dtype=np.int64))
+        key = landmark.tobytes()
+        if key in self._landmarks:
+            return
+        self._landmarks.add(key)
+        for piece in split_components(self.problem.adjacency,
+                                      self.problem.poses_seeing_all(landmark)):
+            self.add(ZeroRegion(piece, landmark))
+
+    def fill(self, required: np.ndarray) -> None:
+        """Give every required pose a candidate: k of its features, most seen first."""
+        problem = self.problem
+        covered = np.zeros(problem.n_poses, dtype=bool)
+        for poses in self.poses:
+            covered[poses] = True
+        sizes = np.diff(problem.visible_csc.indptr)
+        for v in required[~covered[required]]:
+            if covered[v]:
+                continue
+            cols = problem.row_features(int(v))
+            landmark = np.sort(cols[np.argsort(-sizes[cols], kind='stable')[:problem.k]])
+            region = component_of(problem.adjacency, problem.poses_seeing_all(landmark), int(v))
+            self.add(ZeroRegion(region, landmark))
+            covered[region] = True
+
+
+def _master(problem: ZeroProblem, required: np.ndarray,
+            sets: list[np.ndarray]) -> tuple[float, np.ndarray]:
+    """Solve the restricted LP; return its value and per-pose duals (length n)."""
+    matrix = cover_matrix(problem.n_poses, required, sets)
+    if (np.diff(matrix.indptr) == 0).any():
+        raise LandmarkDbError('lower bound: a k-coverable pose lies in no candidate')
+    merged, members = merge_identical_rows(matrix)
+    result = linprog(np.ones(len(sets)), A_ub=-sp.csr_matrix(merged),
+                     b_ub=-np.ones(merged.shape[0]), bounds=(0, None), method='highs')
+    if result.status != 0:
+        raise LandmarkDbError(f'lower bound: the LP failed ({result.message})')
+    group_duals = np.maximum(-np.asarray(result.ineqlin.marginals), 0.0)
+    duals = np.zeros(problem.n_poses)
+    for value, rows in zip(group_duals, members):
+        # Spread a merged row's dual over its poses: every pool column holds all of
+        # them or none, so the pool's column sums are unchanged.
+        duals[required[rows]] = value / rows.size
+    return float(result.fun), duals
+
+
+def _price(problem: ZeroProblem, duals: np.ndarray, node_limit: int,
+           most: int = 64) -> tuple[list[ZeroRegion], float, bool, int]:
+    """Search the candidates of largest dual weight (branch and bound over supports).
+
+    A node is a *support* P = {v : L subset of F~_v} (a Python int bitset over the
+    poses), reached by intersecting feature supports; its weight y(P) bounds every
+    candidate inside it. Its closure counts the features every pose of P sees; with
+    at least k of them, P's connected components are candidates (any k closure
+    features form their landmark) and nothing below P can weigh more. Otherwise P
+    branches on the heavy features (y(support) above the threshold) it does not
+    close over. Supports met twice are searched once.
+
+    Returns:
+        Up to ``most`` candidates of weight above 1, heaviest first; an upper bound U
+        on every candidate's weight (at least 1 plus the rounding slack; the open
+        nodes' weights enter it when the node limit cut the search); and whether the
+        search proved that no candidate weighs more than 1; the nodes searched.
+    """
+    k = problem.k
+    n = problem.n_poses
+    csc = problem.visible_csc
+    weighted = np.flatnonzero(duals > _EPS)
+    weight_of_bit = {int(v): float(duals[v]) for v in weighted}
+    weighted_mask = _bits(weighted)
+
+    def weight(bits: int) -> float:
+        total, rest = 0.0, bits & weighted_mask
+        while rest:
+            low = rest & -rest
+            total += weight_of_bit[low.bit_length() - 1]
+            rest ^= low
+        return total
+
+    supports = [_bits(csc.indices[csc.indptr[c]:csc.indptr[c + 1]])
+                for c in range(problem.n_features)]
+    feature_weight = np.array([weight(b) for b in supports])
+    # Floating-point sums: a support within ``slack`` of 1 is pruned like one of
+    # weight 1, and the certificate divides by 1 + slack.
+    slack = 1e-7
+    threshold = 1.0 + slack
+    heavy = [int(c) for c in np.argsort(-feature_weight) if feature_weight[c] > threshold]
+    found: dict[bytes, tuple[float, ZeroRegion]] = {}
+    heaviest = 0.0
+    open_bound = 0.0
+    nodes = 0
+    visited: set[int] = set()
+    # A node: (weight, support bits, features closing over it, features that may still
+    # cut it). A feature that cuts a child cuts its parent to a support at least as
+    # heavy, so a child only tries the features that cut its parent heavily enough.
+    stack: list[tuple[float, int, list[int], list[int]]] = [
+        (float('inf'), (1 << n) - 1, [], heavy)]
+    while stack:
+        node_weight, bits, closed, tail = stack.pop()
+        if node_weight <= threshold:
+            continue
+        if nodes >= node_limit:
+            open_bound = max(open_bound, node_weight)
+            continue
+        nodes += 1
+        closed = closed + [c for c in tail if bits & supports[c] == bits]
+        if len(closed) >= k:
+            landmark = np.sort(np.asarray(closed[:k], dtype=np.int64))
+            for piece in split_components(problem.adjacency, _indices(bits, n)):
+                piece_weight = float(duals[piece].sum())
+                heaviest = max(heaviest, piece_weight)
+                if piece_weight > 1.0 + 1e-7:
+                    found.setdefault(piece.tobytes(), (piece_weight,
+                                                       ZeroRegion(piece, landmark)))
+            # Keep collecting columns close to the heaviest, prune the rest.
+            threshold = max(1.0 + slack, 0.7 * heaviest)
+            continue
+        cuts = []
+        for c in tail:
+            child = bits & supports[c]
+            if child == bits:
+                continue
+            child_weight = weight(child)
+            if child_weight > threshold:
+                cuts.append((child_weight, c, child))
+        # A candidate below this node needs k - |closed| more closing features g,
+        # and lies inside every one of their cuts: it weighs no more than the
+        # (k - |closed|)-th heaviest cut.
+        need = k - len(closed)
+        if len(cuts) < need:
+            continue
+        if need > 1:
+            cuts.sort(key=lambda item: -item[0])
+            limit = cuts[need - 1][0]
+            if limit <= threshold:
+                continue
+            cuts = [(min(w, limit), c, child) for w, c, child in cuts]
+        viable = [c for _, c, _ in cuts]
+        children = []
+        for child_weight, _, child in cuts:
+            if child in visited:
+                continue
+            visited.add(child)
+            children.append((child_weight, child, closed, viable))
+        children.sort(key=lambda item: item[0])
+        stack.extend(children)
+    best = sorted(found.values(), key=lambda item: -item[0])[:most]
+    return [region for _, region in best], max(heaviest, open_bound, 1.0 + slack), \
+        open_bound == 0.0 and heaviest <= 1.0 + 1e-7, nodes
+
+
+def _bits(indices: np.ndarray) -> int:
+    """Python int with the given bit positions set."""
+    value = 0
+    for i in np.asarray(indices, dtype=np.int64).tolist():
+        value |= 1 << i
+    return value
+
+
+def _indices(bits: int, n: int) -> np.ndarray:
+    """Sorted positions of the set bits of ``bits`` (below ``n``)."""
+    raw = np.frombuffer(bits.to_bytes((n + 7) // 8, 'little'), dtype=np.uint8)
+    return np.flatnonzero(np.unpackbits(raw, bitorder='little')[:n]).astype(np.int64)
