@@ -9,9 +9,9 @@ set-cover solver beats one greedy pass:
    the same 0-MORDP instance (and B.2 with sigma = 0 when sigma > 0, so that every
    k-coverable pose lies in some candidate); every region they return, widened to its
    maximal candidate (the component of {v : L subset of F_v} holding it), starts the
-   pool. The reference is the algorithm serving the most poses (then: fewest
-   regions): ``best`` may leave at most as many k-coverable poses unserved as it does
-   (none when sigma = 0).
+   pool. The reference is, with sigma = 0, the algorithm with the fewest regions
+   (all serve every pose), and under the sigma rule B.2: ``best`` leaves at most as
+   many k-coverable poses unserved as the reference does.
 2. **Seeded greedy candidates.** Repeatedly take the k-coverable pose lying in the
    fewest candidates (ties: seeded priority) and grow candidates around it: for radii
    t of one half, one and two times the typical radius of the pool's regions,
@@ -38,8 +38,9 @@ set-cover solver beats one greedy pass:
    fewer regions, that result is returned.
 
 Every region is a connected component seeing its k landmark features, so the output
-is valid by construction, and it never has more regions, nor more unserved
-k-coverable poses, than any of A.1 to C that serves as many.
+is valid by construction; it never leaves more k-coverable poses unserved than the
+reference, and never has more regions than any of A.1 to C that serves at least as
+many poses as it does.
 """
 from __future__ import annotations
 
@@ -119,10 +120,9 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
     coverable = problem.coverable
     cache = _ComponentCache(problem)
     results = _every_algorithm(problem, alpha)
-    # The reference: the algorithm serving the most poses (then: fewest regions). best
-    # leaves at most as many k-coverable poses unserved as it does.
-    reference = min(results.values(),
-                    key=lambda regions: (_uncovered_count(regions, coverable), len(regions)))
+    # The reference: with sigma = 0 the algorithm with the fewest regions (all serve
+    # every pose); under the sigma rule B.2, whose service best keeps (at least).
+    reference = min(results.values(), key=len) if problem.sigma == 0 else results['B2']
     budget = _uncovered_count(reference, coverable)
     pool = _Pool(n)
     pool.reference = [pool.add(cache.maximal(region)) for region in reference]
