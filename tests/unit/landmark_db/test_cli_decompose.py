@@ -58,6 +58,20 @@ def test_decompose_then_validate(tmp_path, capsys):
     assert capsys.readouterr().out.startswith('valid: 2 regions')
 
 
+def test_decompose_prints_service_and_the_certified_bound(tmp_path, capsys):
+    world = write(tmp_path / 'w.json', LINE)
+    out = tmp_path / 'd.json'
+    assert vbn('decompose', world, '--algorithm', 'B1', '--k', '1', '--bound',
+               '--out', str(out)) == 0
+    printed = capsys.readouterr().out
+    assert 'served 5 of 5 k-coverable poses (100.0 %)' in printed
+    # Feature 10 (poses 0-2) and 12 (poses 2-4) cover the line; no single feature does.
+    assert 'fewer than 2 regions; 2 / 2 = 1.000' in printed
+    assert json.loads(out.read_text())['lower_bound'] == 2
+    assert vbn('validate', world, str(out)) == 0
+    assert 'served 5 of 5' in capsys.readouterr().out
+
+
 @pytest.mark.parametrize('algorithm', ['A1', 'A2', 'A3', 'B1', 'B2', 'C', 'exact', 'best'])
 def test_every_algorithm_from_the_command_line(tmp_path, capsys, algorithm):
     world = write(tmp_path / 'w.json', LINE)
