@@ -145,3 +145,12 @@ def test_exact_refusal_is_a_clean_error(tmp_path, capsys):
     assert vbn('decompose', path, '--algorithm', 'exact', '--k', '4', '--out',
                str(tmp_path / 'd.json')) == 2
     assert 'exact solver refused' in capsys.readouterr().err
+
+
+def test_no_k_coverable_pose_is_one_line_and_nonzero(tmp_path, capsys):
+    world = write(tmp_path / 'w.json', LINE)
+    assert vbn('decompose', world, '--algorithm', 'best', '--k', '3',
+               '--out', str(tmp_path / 'd.json')) == 2
+    err = capsys.readouterr().err
+    assert 'no pose of' in err and 'k = 3' in err and 'most any pose sees is 2' in err
+    assert 'Traceback' not in err and not (tmp_path / 'd.json').exists()

@@ -89,6 +89,12 @@ def run(args: argparse.Namespace) -> int:
             options['time_limit'] = args.time_limit
     check_output_folder(args.out)  # before a decomposition that may take minutes
     world = load_world(args.world)
+    if service(world, [], args.k, args.rho).k_coverable == 0:
+        most = int(world.visible_counts.max(initial=0))
+        raise LandmarkDbError(
+            f'no pose of {args.world} is k-coverable: none sees k = {args.k} features '
+            f'throughout its rho = {args.rho} neighbourhood (the most any pose sees is '
+            f'{most}); lower --k or --rho')
     decomposition = decompose(world, args.algorithm, args.k, args.rho, args.sigma,
                               alpha=args.alpha, rng=args.seed, **options)
     if args.bound and decomposition.lower_bound is None:
