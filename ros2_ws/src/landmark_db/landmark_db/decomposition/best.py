@@ -44,6 +44,7 @@ many poses as it does.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 import logging
 from typing import Any
@@ -162,12 +163,15 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
     regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
     _LOG.debug('best: %d candidates, %d regions (%d uncovered); B.2 %d (%d)', len(pool.poses),
                len(regions), _uncovered_count(regions, coverable), len(reference), budget)
+    if _uncovered_count(regions, coverable) > budget:
+        regions = reference
     # Never worse than any algorithm serving as many poses (the pool holds their regions,
     # so this only guards against a set cover stopped at its node limit).
+    unserved = _uncovered_count(regions, coverable)
     for regions_of in results.values():
-        if _uncovered_count(regions_of, coverable) <= _uncovered_count(regions, coverable) \
-                and len(regions_of) < len(regions):
-            regions = regions_of
+        if _uncovered_count(regions_of, coverable) <= unserved and \
+                len(regions_of) < len(regions):
+            regions, unserved = regions_of, _uncovered_count(regions_of, coverable)
     return regions
 
 
@@ -204,7 +208,6 @@ def _every_algorithm(problem: ZeroProblem, alpha: float) -> dict[str, list[ZeroR
     from landmark_db.decomposition.grow_regions import grow_regions
     from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
 
-    state = problem.rng.bit_generator.state
     results = {}
     for name, run in (('B2', lambda p: shrink_regions(p, 'B2')),
                       ('B1', lambda p: shrink_regions(p, 'B1')),
@@ -212,9 +215,7 @@ def _every_algorithm(problem: ZeroProblem, alpha: float) -> dict[str, list[ZeroR
                       ('A2', lambda p: grow_regions(p, 'A2')),
                       ('A3', lambda p: grow_regions(p, 'A3')),
                       ('C', lambda p: neighbourhood_seeds(p, alpha))):
-        generator = np.random.Generator(type(problem.rng.bit_generator)())
-        generator.bit_generator.state = state
-        results[name] = run(replace(problem, rng=generator, _scratch=None))
+        results[name] = run(replace(problem, rng=copy.deepcopy(problem.rng)))
     return results
 
 
