@@ -138,17 +138,20 @@ class _Columns:
 
     def __init__(self, problem: ZeroProblem) -> None:
         self.problem = problem
-        self.poses: list[np.ndarray] = []
         self.regions: list[ZeroRegion] = []
         self._seen: set[bytes] = set()
         self._landmarks: set[bytes] = set()
+
+    @property
+    def poses(self) -> list[np.ndarray]:
+        """The candidates' pose sets, in pool order."""
+        return [region.poses for region in self.regions]
 
     def add(self, region: ZeroRegion) -> bool:
         key = region.poses.tobytes()
         if key in self._seen:
             return False
         self._seen.add(key)
-        self.poses.append(region.poses)
         self.regions.append(region)
         return True
 
