@@ -50,3 +50,26 @@ def test_the_workers_run_in_a_session_of_their_own():
     import os
     sessions = map_in_processes(os.getsid, [0, 0], 2)
     assert os.getsid(0) not in sessions
+
+
+class _Stopped(Exception):
+    pass
+
+
+def test_check_stop_ends_a_map_whose_chunk_never_finishes():
+    # A chunk of 60 s of sleep: progress would come too late, the check comes each tick.
+    import multiprocessing
+    import time
+    calls = []
+
+    def check():
+        calls.append(time.monotonic())
+        if len(calls) >= 3:
+            raise _Stopped
+
+    start = time.monotonic()
+    with pytest.raises(_Stopped):
+        map_in_processes(time.sleep, [60.0, 60.0], 2, check_stop=check)
+    assert time.monotonic() - start < 30
+    assert len(calls) == 3
+    assert multiprocessing.active_children() == []

@@ -178,7 +178,8 @@ def _extract_encoded(image: EncodedImage) -> ImageFeatures | str:
 
 def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig(),
                  workers: int | None = None,
-                 progress: Callable[[int], None] | None = None
+                 progress: Callable[[int], None] | None = None,
+                 check_stop: Callable[[], None] | None = None
                  ) -> list[ImageFeatures | str]:
     """Extract the features of many encoded images, in order, over a process pool.
 
@@ -187,6 +188,8 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
         config: SIFT settings.
         workers: Processes (default: every core; 1 runs in this process).
         progress: Called with the number of images just finished (e.g. a tqdm update).
+        check_stop: Called between images, and every half second while the pool works;
+            what it raises stops the extraction (the workers are terminated).
 
     Returns:
         Per image, its features, or the one-line reason it could not be decoded.
@@ -198,10 +201,13 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
     if workers == 1 or len(images) < 4:
         _init_worker(config)
         for image in images:
+            if check_stop is not None:
+                check_stop()
             results.append(_extract_encoded(image))
             if progress:
                 progress(1)
         return results
     chunk = max(1, min(16, len(images) // (4 * workers)))
     return map_in_processes(_extract_encoded, images, workers, initializer=_init_pool_worker,
-                            initargs=(config,), chunksize=chunk, progress=progress)
+                            initargs=(config,), chunksize=chunk, progress=progress,
+                            check_stop=check_stop)

@@ -104,7 +104,8 @@ def _run_chunk(job: tuple[Callable[[Any], Any], list[Any]]) -> list[Any]:
 def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: int, *,
                      initializer: Callable[..., None] | None = None, initargs: tuple = (),
                      chunksize: int = 1,
-                     progress: Callable[[int], None] | None = None) -> list[Any]:
+                     progress: Callable[[int], None] | None = None,
+                     check_stop: Callable[[], None] | None = None) -> list[Any]:
     """Return ``[func(item) for item in items]`` computed in ``workers`` processes, in order.
 
     Args:
@@ -116,6 +117,10 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
         chunksize: Items sent to a worker at once.
         progress: Called with the number of results just finished (a chunk's), in the
             calling process.
+        check_stop: Called in the calling process every half second while the map
+            waits, whether or not a chunk finished; what it raises ends the map (the
+            workers are terminated first). A slow chunk (workers still importing on a
+            loaded machine) then cannot hold a shutdown back.
 
     Returns:
         The results, in the order of ``items``.
@@ -140,6 +145,8 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
         chunks = [(func, items[i:i + size]) for i in range(0, len(items), size)]
         results_of = pool.imap(_run_chunk, chunks)
         while True:
+            if check_stop is not None:
+                check_stop()
             try:
                 result = results_of.next(timeout=_WATCH_S)
             except StopIteration:

@@ -366,7 +366,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
 
     stages.begin('features', f'{len(frames)} images on {config.n_workers} process(es)')
     results = extract_many([f.image for f in frames], config.sift, config.n_workers,
-                           progress=image_done)
+                           progress=image_done, check_stop=check_stop)
     features: list[ImageFeatures] = []
     undecodable = 0
     for frame, result in zip(frames, results, strict=True):
@@ -387,7 +387,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
     classes = correspondence_classes(
         pose_descriptors, sampling.edges,
         replace(config.classes, workers=max(config.classes.workers, config.n_workers)),
-        progress=(lambda _count: check_stop()) if check_stop is not None else None)
+        check_stop=check_stop)
     # One scene point per class: the rays of its members must meet (verification.py).
     classes = verify_classes(
         classes,
@@ -427,7 +427,8 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
             f"k={dc.k} is larger than any pose's visibility (at most "
             f'{int(per_pose.max(initial=0))} filtered features per pose): lower --k')
     try:
-        decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed)
+        decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed,
+                                  check_stop=check_stop)
     except LandmarkDbError as error:
         raise VisibilityBuilderError(str(error)) from None
     served = service(world, [region.poses for region in decomposition.regions], dc.k, dc.rho)

@@ -311,7 +311,8 @@ class BuilderNode(Node):
         # rosout is gone with the context: say it on stderr, as a command would.
         if self.building and not self.built.wait(timeout=CLOSE_WAIT_S):
             print(f'builder: the build did not stop within {CLOSE_WAIT_S:g} s of the '
-                  f'shutdown; {db} is written only if it completes', file=sys.stderr)
+                  f'shutdown (in its {self.stage or "first"} step); {db} is written only '
+                  f'if it completes', file=sys.stderr)
             self.exit_code = 130
         elif self.built.is_set() and self.closing_stopped_build:
             print(f'builder: build stopped by the shutdown, {db} left as it was',

@@ -268,7 +268,8 @@ def pose_pairs_within(edges: np.ndarray, n_poses: int, gamma: int) -> np.ndarray
 
 def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.ndarray,
                            config: ClassConfig | None = None,
-                           progress: Callable[[int], None] | None = None) -> ClassResult:
+                           progress: Callable[[int], None] | None = None,
+                           check_stop: Callable[[], None] | None = None) -> ClassResult:
     """Compute feature classes and per-pose visibility with Algorithm 6.3.
 
     Args:
@@ -279,6 +280,8 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
         config: tau, gamma, ratio and workers; defaults of :class:`ClassConfig`.
         progress: Called with 1 after each chunk of pose pairs is matched; what it raises
             stops the matching (the pool's workers are terminated).
+        check_stop: Called before each chunk and every half second while the pool
+            matches; what it raises stops the matching likewise.
 
     Returns:
         The :class:`ClassResult`. ``stats`` holds: ``poses``, ``features``,
@@ -323,10 +326,13 @@ def correspondence_classes(pose_descriptors: Sequence[np.ndarray], edges: np.nda
                 [(chunk_descriptors(descriptors, chunk_pairs, chunk_self), offsets,
                   chunk_pairs, chunk_self, tau2, config.ratio, check2)
                  for chunk_pairs, chunk_self in chunks],
-                config.workers, initializer=init_worker, progress=progress)
+                config.workers, initializer=init_worker, progress=progress,
+                check_stop=check_stop)
         else:
             results = []
             for chunk_pairs, chunk_self in chunks:
+                if check_stop is not None:
+                    check_stop()
                 results.append(match_chunk(descriptors, offsets, chunk_pairs, chunk_self,
                                            tau2, config.ratio, check2))
                 if progress is not None:

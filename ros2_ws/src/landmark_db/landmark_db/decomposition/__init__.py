@@ -25,6 +25,7 @@ disconnected pieces, ties) live in :mod:`.problem`; redundancy elimination
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import logging
 import math
 import time
@@ -68,7 +69,8 @@ _LOG = logging.getLogger(__name__)
 
 def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = DECOMPOSITION.rho,
               sigma: int = DECOMPOSITION.sigma, alpha: float = DECOMPOSITION.alpha,
-              rng: Any = None, **options: Any) -> Decomposition:
+              rng: Any = None, check_stop: Callable[[], None] | None = None,
+              **options: Any) -> Decomposition:
     """Decompose a world into regions with k-feature landmarks (rho-MORDP).
 
     Args:
@@ -81,6 +83,9 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = DECOMPOSI
         alpha: algorithm C's least unassigned fraction of N_r(v), in (0, 1].
         rng: ``numpy.random.Generator`` or seed for tie-breaking; None means
             ``DECOMPOSITION.seed`` (0).
+        check_stop: Called between the steps of the longer searches (``best``'s
+            algorithms, seeds and pricing rounds; before ``exact``); what it raises
+            ends the decomposition (the builder node's shutdown).
         **options: passed to ``exact`` (``time_limit``, ``max_subsets``,
             ``max_candidates``) or ``best`` (``time_limit``, ``rounds``).
 
@@ -115,7 +120,9 @@ def decompose(world: WorldInstance, algorithm: str, k: int, rho: int = DECOMPOSI
     start = time.perf_counter()
     problem = zero_problem(world, k, rho, sigma, generator)
     certificate: dict[str, Any] = {}
-    reduced = _run(problem, algorithm, float(alpha), options, certificate) \
+    if check_stop is not None:
+        check_stop()
+    reduced = _run(problem, algorithm, float(alpha), options, certificate, check_stop) \
         if problem.coverable.any() else []
     hood = neighbourhood_matrix(world.adjacency, rho) if rho else None
     regions = []
@@ -159,7 +166,8 @@ def certify(world: WorldInstance, decomposition: Decomposition,
 
 
 def _run(problem: ZeroProblem, algorithm: str, alpha: float,
-         options: dict[str, Any], certificate: dict[str, Any]) -> list[ZeroRegion]:
+         options: dict[str, Any], certificate: dict[str, Any],
+         check_stop: Callable[[], None] | None = None) -> list[ZeroRegion]:
     if algorithm in ('A1', 'A2', 'A3'):
         from landmark_db.decomposition.grow_regions import grow_regions
         return grow_regions(problem, algorithm)
@@ -173,7 +181,8 @@ def _run(problem: ZeroProblem, algorithm: str, alpha: float,
         from landmark_db.decomposition.exact import exact_cover
         return exact_cover(problem, **options)
     from landmark_db.decomposition.best import best_cover
-    return best_cover(problem, alpha=alpha, certificate=certificate, **options)
+    return best_cover(problem, alpha=alpha, certificate=certificate, check_stop=check_stop,
+                      **options)
 
 
 def _check_int(value: Any, name: str, least: int) -> int:

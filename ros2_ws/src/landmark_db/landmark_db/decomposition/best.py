@@ -44,6 +44,7 @@ many poses as it does.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import copy
 from dataclasses import replace
 import logging
@@ -96,7 +97,8 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
                time_limit: float = DECOMPOSITION.best_time_limit, multiplicity: int = 5,
                max_seeds: int | None = None, merge_rounds: int = 3,
                pricing_rounds: int = PRICING_ROUNDS, pricing_nodes: int = PRICING_NODES,
-               certificate: dict[str, Any] | None = None) -> list[ZeroRegion]:
+               certificate: dict[str, Any] | None = None,
+               check_stop: Callable[[], None] | None = None) -> list[ZeroRegion]:
     """Run the ``best`` heuristic on a 0-MORDP instance.
 
     Args:
@@ -113,6 +115,9 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
         pricing_nodes: branch-and-bound nodes over all pricing rounds.
         certificate: if given, receives ``'bound'``, the certified
             :class:`~.bound.LowerBound` the pricing proved (sigma = 0 only).
+        check_stop: Called between the steps (each algorithm, each batch of seeds,
+            each merge round, each pricing round and every 1,024 of its nodes); what
+            it raises ends the search (a builder that is shut down).
 
     Returns:
         The regions.
@@ -120,7 +125,8 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
     n = problem.n_poses
     coverable = problem.coverable
     cache = _ComponentCache(problem)
-    results = _every_algorithm(problem, alpha)
+    stop = check_stop if check_stop is not None else _no_stop
+    results = _every_algorithm(problem, alpha, stop)
     # The reference: with sigma = 0 the algorithm with the fewest regions (all serve
     # every pose); under the sigma rule B.2, whose service best keeps (at least).
     reference = min(results.values(), key=len) if problem.sigma == 0 else results['B2']
@@ -133,12 +139,13 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
     if problem.sigma:
         for region in shrink_regions(replace(problem, sigma=0), 'B2'):
             pool.add(region)
-    _add_seeded_candidates(problem, pool, cache, multiplicity, max_seeds)
+    _add_seeded_candidates(problem, pool, cache, multiplicity, max_seeds, stop)
 
     required = np.flatnonzero(coverable)
     try:
         chosen = _partial_cover(problem, pool, required, budget, time_limit)
         for _ in range(merge_rounds):
+            stop()
             if chosen is None:
                 break
             added = _add_merge_candidates(problem, pool, cache, chosen)
@@ -158,7 +165,7 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
         return reference
     if problem.sigma == 0 and pricing_rounds > 0 and n <= PRICING_MAX_POSES:
         chosen = _priced_cover(problem, pool, required, chosen, time_limit, pricing_rounds,
-                               pricing_nodes, certificate)
+                               pricing_nodes, certificate, stop)
     regions = [ZeroRegion(pool.poses[i], pool.landmarks[i]) for i in chosen]
     regions = _sigma_prune(eliminate_redundant(regions, n, problem.rng), problem, budget)
     _LOG.debug('best: %d candidates, %d regions (%d uncovered); B.2 %d (%d)', len(pool.poses),
@@ -177,13 +184,14 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
 
 def _priced_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray,
                   chosen: np.ndarray, time_limit: float, rounds: int, nodes: int,
-                  certificate: dict[str, Any] | None) -> np.ndarray:
+                  certificate: dict[str, Any] | None,
+                  stop: Callable[[], None]) -> np.ndarray:
     """Grow the pool by column generation, then cover again; keep the smaller cover."""
     columns: list[ZeroRegion] = []
     bound = lower_bound(problem, [ZeroRegion(poses, landmark) for poses, landmark
                                   in zip(pool.poses, pool.landmarks)],
                         max_rounds=rounds, node_limit=min(nodes, 50_000), total_nodes=nodes,
-                        columns_out=columns)
+                        columns_out=columns, check_stop=stop)
     if certificate is not None:
         certificate['bound'] = bound
     before = len(pool.poses)
@@ -199,7 +207,12 @@ def _priced_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray,
     return again if again.size < chosen.size else chosen
 
 
-def _every_algorithm(problem: ZeroProblem, alpha: float) -> dict[str, list[ZeroRegion]]:
+def _no_stop() -> None:
+    return None
+
+
+def _every_algorithm(problem: ZeroProblem, alpha: float,
+                     stop: Callable[[], None] = _no_stop) -> dict[str, list[ZeroRegion]]:
     """Run A.1, A.2, A.3, B.1, B.2 and C on the instance.
 
     Each gets its own copy of the tie-breaking generator, so that each gives what it
@@ -215,6 +228,7 @@ def _every_algorithm(problem: ZeroProblem, alpha: float) -> dict[str, list[ZeroR
                       ('A2', lambda p: grow_regions(p, 'A2')),
                       ('A3', lambda p: grow_regions(p, 'A3')),
                       ('C', lambda p: neighbourhood_seeds(p, alpha))):
+        stop()
         results[name] = run(replace(problem, rng=copy.deepcopy(problem.rng)))
     return results
 
@@ -376,7 +390,8 @@ def _local_search(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndarray,
 
 
 def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCache,
-                           multiplicity: int, max_seeds: int | None) -> None:
+                           multiplicity: int, max_seeds: int | None,
+                           stop: Callable[[], None] = _no_stop) -> None:
     """Grow candidates around the k-coverable poses lying in the fewest candidates."""
     n = problem.n_poses
     coverable = problem.coverable
@@ -395,6 +410,8 @@ def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentC
         seed = int(candidates[np.argmin(keys)])
         seeded[seed] = True
         seeds_left -= 1
+        if seeds_left % 32 == 0:
+            stop()
         for region in _grow_candidates(problem, seed, coverable, cache, radii):
             pool.add(region)
 

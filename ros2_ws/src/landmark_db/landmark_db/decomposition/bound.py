@@ -31,6 +31,7 @@ decomposition (every k-coverable pose served), as the exact optimum is.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 import math
 import time
@@ -84,7 +85,8 @@ class LowerBound:
 
 def lower_bound(problem: ZeroProblem, pool: list[ZeroRegion], max_rounds: int = 40,
                 node_limit: int = 50_000, total_nodes: int = 400_000,
-                columns_out: list[ZeroRegion] | None = None) -> LowerBound:
+                columns_out: list[ZeroRegion] | None = None,
+                check_stop: Callable[[], None] | None = None) -> LowerBound:
     """Bound the fewest regions of a complete decomposition of ``problem`` from below.
 
     Args:
@@ -97,6 +99,8 @@ def lower_bound(problem: ZeroProblem, pool: list[ZeroRegion], max_rounds: int = 
         total_nodes: most nodes over all rounds; no round starts past it.
         columns_out: if given, receives every candidate of the final pool (maximal
             candidates, each with its landmark), for a set cover over them.
+        check_stop: Called each round and every 1,024 branch-and-bound nodes; what
+            it raises ends the search.
 
     Returns:
         The bound.
@@ -117,8 +121,11 @@ def lower_bound(problem: ZeroProblem, pool: list[ZeroRegion], max_rounds: int = 
     while True:
         lp_value, duals = _master(problem, required, columns.poses)
         total = float(duals.sum())
+        if check_stop is not None:
+            check_stop()
         found, upper, proven, used = _price(problem, duals,
-                                            min(node_limit, total_nodes - spent))
+                                            min(node_limit, total_nodes - spent),
+                                            check_stop=check_stop)
         spent += used
         rounds += 1
         lp_bound = max(lp_bound, total / upper)
@@ -203,7 +210,8 @@ def _master(problem: ZeroProblem, required: np.ndarray,
 
 
 def _price(problem: ZeroProblem, duals: np.ndarray, node_limit: int,
-           most: int = 64) -> tuple[list[ZeroRegion], float, bool, int]:
+           most: int = 64, check_stop: Callable[[], None] | None = None
+           ) -> tuple[list[ZeroRegion], float, bool, int]:
     """Search the candidates of largest dual weight (branch and bound over supports).
 
     A node is a *support* P = {v : L subset of F~_v} (a Python int bitset over the
@@ -261,6 +269,8 @@ def _price(problem: ZeroProblem, duals: np.ndarray, node_limit: int,
             open_bound = max(open_bound, node_weight)
             continue
         nodes += 1
+        if check_stop is not None and nodes % 1024 == 0:
+            check_stop()
         closed = closed + [c for c in tail if bits & supports[c] == bits]
         if len(closed) >= k:
             landmark = np.sort(np.asarray(closed[:k], dtype=np.int64))
