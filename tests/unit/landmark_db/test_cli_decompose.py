@@ -99,6 +99,8 @@ def test_validate_exits_1_and_lists_problems(tmp_path, capsys):
     ('{"poses": [[0, 0], [1, NaN]], "edges": [], "visible": [[], []]}', [], 'non-finite'),
     ({**LINE, 'visible': [[1], [-4], [], [], []]}, [], 'negative feature id -4'),
     ({**LINE, 'visible': [[1]]}, [], "5 poses but 'visible' has 1"),
+    ({**LINE, 'poses': [[0, 0], [1, 0], [1, 0], [3, 0], [4, 0]]}, [],
+     'poses 1 and 2 are both at (1, 0)'),
     ({'poses': [], 'edges': []}, [], "no 'visible'"),
     ('{"poses": [[0, 0]', [], 'not valid JSON'),
     (LINE, ['--k', '0'], '--k must be at least 1'),
@@ -154,3 +156,18 @@ def test_no_k_coverable_pose_is_one_line_and_nonzero(tmp_path, capsys):
     err = capsys.readouterr().err
     assert 'no pose of' in err and 'k = 3' in err and 'most any pose sees is 2' in err
     assert 'Traceback' not in err and not (tmp_path / 'd.json').exists()
+
+
+def test_a_disconnected_pose_graph_gets_a_region_per_piece(tmp_path, capsys):
+    # Two strips 8 m apart with the same features: no region may span the gap.
+    world = write(tmp_path / 'w.json', {
+        'poses': [[0, 0], [1, 0], [2, 0], [10, 0], [11, 0], [12, 0]],
+        'edges': [[0, 1], [1, 2], [3, 4], [4, 5]], 'visible': [[1, 2, 3]] * 6})
+    for algorithm in ('A1', 'B2', 'exact', 'best'):
+        out = tmp_path / f'{algorithm}.json'
+        assert vbn('decompose', world, '--algorithm', algorithm, '--k', '2', '--rho', '1',
+                   '--out', str(out)) == 0
+        regions = json.loads(out.read_text())['regions']
+        assert sorted(r['poses'] for r in regions) == [[0, 1, 2], [3, 4, 5]], algorithm
+        assert vbn('validate', world, str(out)) == 0
+        assert 'served 6 of 6' in capsys.readouterr().out

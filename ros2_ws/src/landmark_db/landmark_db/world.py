@@ -368,6 +368,15 @@ def _check_poses(raw: Any) -> np.ndarray:
     bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
     if bad.size:
         raise LandmarkDbError(f'pose {int(bad[0])} has non-finite coordinates')
+    # One pose per place: a repeated pose would split one place's visibility in two
+    # and count it twice in the service.
+    _, first, counts = np.unique(arr, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        twice = arr[first[np.argmax(counts > 1)]]
+        same = np.flatnonzero((arr == twice).all(axis=1))
+        raise LandmarkDbError(
+            f'poses {int(same[0])} and {int(same[1])} are both at ({twice[0]:g}, '
+            f'{twice[1]:g}): a world has one pose per place (merge their visibility)')
     return arr
 
 
