@@ -8,7 +8,7 @@ from landmark_db.decomposition import decompose
 from landmark_db.world import grid_world
 
 
-class _Stopped(Exception):
+class _StopRequestError(Exception):
     pass
 
 
@@ -38,9 +38,9 @@ def test_best_calls_check_stop_and_its_exception_ends_the_decomposition():
     def stop_at_third():
         seen.append(1)
         if len(seen) == 3:
-            raise _Stopped
+            raise _StopRequestError
 
-    with pytest.raises(_Stopped):
+    with pytest.raises(_StopRequestError):
         decompose(world, 'best', k=4, check_stop=stop_at_third)
     assert len(seen) == 3
 
@@ -48,7 +48,7 @@ def test_best_calls_check_stop_and_its_exception_ends_the_decomposition():
 @pytest.mark.parametrize('algorithm', ['A1', 'B2', 'exact'])
 def test_every_algorithm_checks_once_before_it_runs(algorithm):
     def stop():
-        raise _Stopped
+        raise _StopRequestError
 
-    with pytest.raises(_Stopped):
+    with pytest.raises(_StopRequestError):
         decompose(_world(), algorithm, k=4, check_stop=stop)

@@ -52,7 +52,7 @@ def test_the_workers_run_in_a_session_of_their_own():
     assert os.getsid(0) not in sessions
 
 
-class _Stopped(Exception):
+class _StopRequestError(Exception):
     pass
 
 
@@ -65,10 +65,10 @@ def test_check_stop_ends_a_map_whose_chunk_never_finishes():
     def check():
         calls.append(time.monotonic())
         if len(calls) >= 3:
-            raise _Stopped
+            raise _StopRequestError
 
     start = time.monotonic()
-    with pytest.raises(_Stopped):
+    with pytest.raises(_StopRequestError):
         map_in_processes(time.sleep, [60.0, 60.0], 2, check_stop=check)
     assert time.monotonic() - start < 30
     assert len(calls) == 3
