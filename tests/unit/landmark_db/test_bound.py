@@ -39,3 +39,50 @@ def test_bound_never_exceeds_the_exact_optimum(seed, coherent, k, rho):
         assert best.lower_bound <= len(exact.regions)
     if bound.proven:
         assert bound.lp_bound <= len(exact.regions) + 1e-6
+
+
+def _every_candidate(problem):
+    """All maximal candidates by brute force: components of each k-subset's support."""
+    from itertools import combinations
+
+    from landmark_db.decomposition.problem import split_components
+    found = {}
+    for landmark in combinations(range(problem.n_features), problem.k):
+        poses = problem.poses_seeing_all(np.array(landmark))
+        if poses.size:
+            for piece in split_components(problem.adjacency, poses):
+                found[piece.tobytes()] = piece
+    return list(found.values())
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), coherent=st.booleans(), k=st.integers(1, 3),
+       dual_seed=st.integers(0, 1000), scale=st.floats(0.05, 1.5))
+def test_anchored_pricing_bounds_every_candidate(seed, coherent, k, dual_seed, scale):
+    from math import comb
+
+    from landmark_db.decomposition.pricing import SLACK, AnchoredPricing
+    from landmark_db.decomposition.problem import zero_problem
+    world = random_world(seed, coherent)
+    problem = zero_problem(world, k, 0, 0, np.random.default_rng(0))
+    if comb(problem.n_features, k) > 3000:
+        return
+    rng = np.random.default_rng(dual_seed)
+    duals = np.where(rng.random(problem.n_poses) < 0.6,
+                     rng.random(problem.n_poses) * scale, 0.0)
+    candidates = _every_candidate(problem)
+    heaviest = max((float(duals[c].sum()) for c in candidates), default=0.0)
+    # An unlimited search and one cut short: U bounds every candidate either way.
+    for limit, anchor_limit in ((10**6, 10**6), (3, 2)):
+        priced = AnchoredPricing(problem).price(duals, limit, anchor_limit=anchor_limit)
+        assert priced.upper >= heaviest - 1e-9
+        if priced.proven:
+            assert heaviest <= 1.0 + SLACK
+        keys = {c.tobytes() for c in candidates}
+        for region in priced.regions:
+            assert region.poses.tobytes() in keys          # maximal candidates
+            assert float(duals[region.poses].sum()) > 1.0
+            assert problem.visible_csc[region.poses][:, region.columns].toarray().all()
+    exact = AnchoredPricing(problem).price(duals, 10**6, anchor_limit=10**6)
+    if heaviest > 1.0 + 1e-6:
+        assert exact.regions and not exact.proven

@@ -9,14 +9,12 @@ linear relaxation of that cover and never lists them:
 1. **Restricted master.** The LP relaxation min sum x_S, sum_{S containing v} x_S >= 1
    over a pool of candidates (the decomposition's own landmarks and their components)
    is solved with HiGHS (``scipy.optimize.linprog``); its duals y_v >= 0 price the poses.
-2. **Pricing** (column generation): the candidate S maximising y(S) = sum over v in S
-   of y_v. The search runs over *supports* P(L) = {v : L subset of F~_v}, bitsets
-   intersected one feature at a time; a support can only shrink as L grows, so its
-   weight bounds everything below it, and so does the (k - |closure|)-th heaviest of
-   its one-feature cuts, since a candidate below needs that many more features seen
-   from all its poses (branch and bound). A support whose *closure* (the features all
-   its poses see) holds k features has its connected components as candidates and
-   nothing below it weighs more. Candidates with y(S) > 1 join the pool and the
+2. **Pricing** (column generation, :mod:`.pricing`): the candidate S maximising
+   y(S) = sum over v in S of y_v, searched anchor by anchor (each candidate of positive
+   weight holds a pose of positive dual) by branch and bound over the supports
+   {v : C subset of F~_v} of growing feature sets C, each cut to the anchor's
+   component; a support bounds everything below it, and so does the (k - |closure|)-th
+   heaviest of its one-feature cuts. Candidates with y(S) > 1 join the pool and the
    master is solved again.
 3. **Certificate.** For any duals y and any U >= max_S y(S) over *all* candidates,
    y / U is feasible for the dual of the full LP, so sum(y) / U is a lower bound on the
@@ -33,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+import logging
 import math
 import time
 
@@ -40,6 +39,7 @@ import numpy as np
 from scipy.optimize import linprog
 import scipy.sparse as sp
 
+from landmark_db.decomposition.pricing import AnchoredPricing
 from landmark_db.decomposition.problem import (
     ZeroProblem,
     ZeroRegion,
@@ -52,6 +52,7 @@ from landmark_db.errors import LandmarkDbError
 __all__ = ['LowerBound', 'lower_bound']
 
 _EPS = 1e-9
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -118,18 +119,22 @@ def lower_bound(problem: ZeroProblem, pool: list[ZeroRegion], max_rounds: int = 
     columns.fill(required)
     rounds, proven, spent = 0, False, 0
     lp_value, lp_bound = 0.0, 0.0
+    pricing = AnchoredPricing(problem)
     while True:
         lp_value, duals = _master(problem, required, columns.poses)
         total = float(duals.sum())
         if check_stop is not None:
             check_stop()
-        found, upper, proven, used = _price(problem, duals,
-                                            min(node_limit, total_nodes - spent),
-                                            check_stop=check_stop)
+        priced = pricing.price(duals, min(node_limit, total_nodes - spent),
+                               check_stop=check_stop)
+        found, upper, proven, used = priced.regions, priced.upper, priced.proven, priced.nodes
         spent += used
         rounds += 1
         lp_bound = max(lp_bound, total / upper)
         added = sum(columns.add(region) for region in found)
+        _LOG.debug('bound round %d: LP %.3f, U %.4f, bound %.3f, %d nodes, %d new columns '
+                   '(%d in all), %.1f s', rounds, lp_value, upper, total / upper, used, added,
+                   len(columns.regions), time.perf_counter() - start)
         if proven or not added:
             break
         if rounds >= max_rounds or spent >= total_nodes:
@@ -207,125 +212,3 @@ def _master(problem: ZeroProblem, required: np.ndarray,
         # them or none, so the pool's column sums are unchanged.
         duals[required[rows]] = value / rows.size
     return float(result.fun), duals
-
-
-def _price(problem: ZeroProblem, duals: np.ndarray, node_limit: int,
-           most: int = 64, check_stop: Callable[[], None] | None = None
-           ) -> tuple[list[ZeroRegion], float, bool, int]:
-    """Search the candidates of largest dual weight (branch and bound over supports).
-
-    A node is a *support* P = {v : L subset of F~_v} (a Python int bitset over the
-    poses), reached by intersecting feature supports; its weight y(P) bounds every
-    candidate inside it. Its closure counts the features every pose of P sees; with
-    at least k of them, P's connected components are candidates (any k closure
-    features form their landmark) and nothing below P can weigh more. Otherwise P
-    branches on the heavy features (y(support) above the threshold) it does not
-    close over. Supports met twice are searched once.
-
-    Returns:
-        Up to ``most`` candidates of weight above 1, heaviest first; an upper bound U
-        on every candidate's weight (at least 1 plus the rounding slack; the open
-        nodes' weights enter it when the node limit cut the search); and whether the
-        search proved that no candidate weighs more than 1; the nodes searched.
-    """
-    k = problem.k
-    n = problem.n_poses
-    csc = problem.visible_csc
-    weighted = np.flatnonzero(duals > _EPS)
-    weight_of_bit = {int(v): float(duals[v]) for v in weighted}
-    weighted_mask = _bits(weighted)
-
-    def weight(bits: int) -> float:
-        total, rest = 0.0, bits & weighted_mask
-        while rest:
-            low = rest & -rest
-            total += weight_of_bit[low.bit_length() - 1]
-            rest ^= low
-        return total
-
-    supports = [_bits(csc.indices[csc.indptr[c]:csc.indptr[c + 1]])
-                for c in range(problem.n_features)]
-    feature_weight = np.array([weight(b) for b in supports])
-    # Floating-point sums: a support within ``slack`` of 1 is pruned like one of
-    # weight 1, and the certificate divides by 1 + slack.
-    slack = 1e-7
-    threshold = 1.0 + slack
-    heavy = [int(c) for c in np.argsort(-feature_weight) if feature_weight[c] > threshold]
-    found: dict[bytes, tuple[float, ZeroRegion]] = {}
-    heaviest = 0.0
-    open_bound = 0.0
-    nodes = 0
-    visited: set[int] = set()
-    # A node: (weight, support bits, features closing over it, features that may still
-    # cut it). A feature that cuts a child cuts its parent to a support at least as
-    # heavy, so a child only tries the features that cut its parent heavily enough.
-    stack: list[tuple[float, int, list[int], list[int]]] = [
-        (float('inf'), (1 << n) - 1, [], heavy)]
-    while stack:
-        node_weight, bits, closed, tail = stack.pop()
-        if node_weight <= threshold:
-            continue
-        if nodes >= node_limit:
-            open_bound = max(open_bound, node_weight)
-            continue
-        nodes += 1
-        if check_stop is not None and nodes % 1024 == 0:
-            check_stop()
-        closed = closed + [c for c in tail if bits & supports[c] == bits]
-        if len(closed) >= k:
-            landmark = np.sort(np.asarray(closed[:k], dtype=np.int64))
-            for piece in split_components(problem.adjacency, _indices(bits, n)):
-                piece_weight = float(duals[piece].sum())
-                heaviest = max(heaviest, piece_weight)
-                if piece_weight > 1.0 + 1e-7:
-                    found.setdefault(piece.tobytes(), (piece_weight,
-                                                       ZeroRegion(piece, landmark)))
-            # Keep collecting columns close to the heaviest, prune the rest.
-            threshold = max(1.0 + slack, 0.7 * heaviest)
-            continue
-        cuts = []
-        for c in tail:
-            child = bits & supports[c]
-            if child == bits:
-                continue
-            child_weight = weight(child)
-            if child_weight > threshold:
-                cuts.append((child_weight, c, child))
-        # A candidate below this node needs k - |closed| more closing features g,
-        # and lies inside every one of their cuts: it weighs no more than the
-        # (k - |closed|)-th heaviest cut.
-        need = k - len(closed)
-        if len(cuts) < need:
-            continue
-        if need > 1:
-            cuts.sort(key=lambda item: -item[0])
-            limit = cuts[need - 1][0]
-            if limit <= threshold:
-                continue
-            cuts = [(min(w, limit), c, child) for w, c, child in cuts]
-        viable = [c for _, c, _ in cuts]
-        children = []
-        for child_weight, _, child in cuts:
-            if child in visited:
-                continue
-            visited.add(child)
-            children.append((child_weight, child, closed, viable))
-        children.sort(key=lambda item: item[0])
-        stack.extend(children)
-    best = sorted(found.values(), key=lambda item: -item[0])[:most]
-    return [region for _, region in best], max(heaviest, open_bound, 1.0 + slack), \
-        open_bound == 0.0 and heaviest <= 1.0 + 1e-7, nodes
-
-
-def _bits(indices: np.ndarray) -> int:
-    """Python int with the given bit positions set."""
-    value = 0
-    for i in np.asarray(indices, dtype=np.int64).tolist():
-        value |= 1 << i
-    return value
-
-
-def _indices(bits: int, n: int) -> np.ndarray:
-    """Sorted positions of the set bits of ``bits`` (below ``n``)."""
-    raw = np.frombuffer(bits.to_bytes((n + 7) // 8, 'little'), dtype=np.uint8)
-    return np.flatnonzero(np.unpackbits(raw, bitorder='little')[:n]).astype(np.int64)
