@@ -347,12 +347,6 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
     stages.check_stop = check_stop
     report = stages.report
 
-    def image_done(count: int) -> None:
-        if check_stop is not None:
-            check_stop()
-        if on_image is not None:
-            on_image(count)
-
     if db_path is not None:
         _check_output(Path(db_path))
     frames = exploration.frames
@@ -366,7 +360,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
 
     stages.begin('features', f'{len(frames)} images on {config.n_workers} process(es)')
     results = extract_many([f.image for f in frames], config.sift, config.n_workers,
-                           progress=image_done, check_stop=check_stop)
+                           progress=on_image, check_stop=check_stop)
     features: list[ImageFeatures] = []
     undecodable = 0
     for frame, result in zip(frames, results, strict=True):

@@ -130,8 +130,9 @@ class AnchoredPricing:
             root_weight = weight(root)
             if root_weight > threshold:
                 features = problem.row_features(anchor).tolist()
-                heavy = [c for c in features if weight(self.supports[c] & root) > threshold]
-                heavy.sort(key=lambda c: -weight(self.supports[c] & root))
+                cut = {c: weight(self.supports[c] & root) for c in features}
+                heavy = sorted((c for c in features if cut[c] > threshold),
+                               key=lambda c: -cut[c])
                 stack = [(root_weight, root, [], heavy)]
                 visited: set[int] = {root}
                 start = nodes
@@ -146,7 +147,7 @@ class AnchoredPricing:
                     if check_stop is not None and nodes % 1024 == 0:
                         check_stop()
                     comp = component(anchor, bits)
-                    comp_weight = weight(comp) if comp != bits else node_weight
+                    comp_weight = weight(comp)
                     if comp_weight <= threshold:
                         continue
                     closed = closed + [c for c in tail if comp & self.supports[c] == comp]
