@@ -30,9 +30,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
-from landmark_db.decomposition.problem import ZeroProblem, ZeroRegion, component_of
+from landmark_db.decomposition.problem import (
+    ZeroProblem,
+    ZeroRegion,
+    component_of,
+    gather_slices,
+)
 
 __all__ = ['AnchoredPricing', 'Priced']
 
@@ -70,12 +74,17 @@ class AnchoredPricing:
         adjacency = problem.adjacency
         self.neighbours = [_bits(adjacency.indices[adjacency.indptr[v]:adjacency.indptr[v + 1]])
                            for v in range(n)]
-        visible = sp.csr_matrix(problem.visible_csc, dtype=np.int32)
-        shared = (visible @ visible.T).tocsr()
-        shared.data = (shared.data >= problem.k).astype(np.int8)
-        shared.eliminate_zeros()
-        self.shared = [_bits(shared.indices[shared.indptr[v]:shared.indptr[v + 1]])
-                       for v in range(n)]
+        self._shared: dict[int, int] = {}
+
+    def shared(self, anchor: int) -> int:
+        """Return the poses sharing at least k features with ``anchor`` (bits, cached)."""
+        bits = self._shared.get(anchor)
+        if bits is None:
+            csc = self.problem.visible_csc
+            rows, _ = gather_slices(csc.indptr, csc.indices, self.problem.row_features(anchor))
+            counts = np.bincount(rows, minlength=self.problem.n_poses)
+            bits = self._shared[anchor] = _bits(np.flatnonzero(counts >= self.problem.k))
+        return bits
 
     def price(self, duals: np.ndarray, node_limit: int, anchor_limit: int = 5_000,
               most: int = 200, check_stop: Callable[[], None] | None = None) -> Priced:
@@ -123,10 +132,10 @@ class AnchoredPricing:
         for anchor in anchors:
             if nodes >= node_limit:
                 # Unsearched: its root's weight bounds its candidates.
-                open_bound = max(open_bound, weight(self.shared[anchor] & live))
+                open_bound = max(open_bound, weight(self.shared(anchor) & live))
                 live &= ~(1 << anchor)
                 continue
-            root = component(anchor, self.shared[anchor] & live)
+            root = component(anchor, self.shared(anchor) & live)
             root_weight = weight(root)
             if root_weight > threshold:
                 features = problem.row_features(anchor).tolist()
