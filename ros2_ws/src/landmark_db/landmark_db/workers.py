@@ -1,4 +1,4 @@
-"""A process pool that an interrupt stops at once: SIFT and pair matching on every core.
+"""A process pool that an interrupt stops at once: SIFT, matching, decomposition on every core.
 
 ``concurrent.futures.ProcessPoolExecutor`` handles Ctrl-C badly: the terminal sends
 SIGINT to the whole process group, each worker dies of ``KeyboardInterrupt`` wherever it
@@ -23,6 +23,7 @@ from contextlib import contextmanager
 import multiprocessing
 from multiprocessing import context as mp_context
 from multiprocessing import popen_spawn_posix
+from multiprocessing import spawn as mp_spawn
 from multiprocessing import util as mp_util
 import os
 import signal
@@ -30,7 +31,7 @@ import sys
 import threading
 from typing import Any
 
-from vbn_common.errors import VbnCommonError
+from landmark_db.errors import LandmarkDbError
 
 __all__ = ['map_in_processes']
 
@@ -61,20 +62,37 @@ def _spawn_in_own_session(path: str, args: list[str], passfds: Iterable[int]) ->
         os.close(errpipe_write)
 
 
+def _preparation_without_main(name: str) -> dict[str, Any]:
+    """``spawn.get_preparation_data`` without the caller's main module.
+
+    A spawned child normally runs the parent's ``__main__`` script again (as
+    ``__mp_main__``): a script that calls a parallel step at its top level, without an
+    ``if __name__ == '__main__'`` guard, would then run itself in every worker. The
+    workers run module-level functions of the packages only, so they need no main.
+    """
+    data = _GET_PREPARATION_DATA(name)
+    data.pop('init_main_from_path', None)
+    data.pop('init_main_from_name', None)
+    return data
+
+
+_GET_PREPARATION_DATA = mp_spawn.get_preparation_data
+
+
 class _SessionPopen(popen_spawn_posix.Popen):
     """The 'spawn' start method, the child in a session of its own (CPython 3.11)."""
 
     def _launch(self, process_obj: Any) -> None:
-        if sys.version_info[:2] != (3, 11):     # fork_exec's arguments are 3.11's
-            super()._launch(process_obj)
-            return
         with _SPAWN_LOCK:
             original = mp_util.spawnv_passfds
-            mp_util.spawnv_passfds = _spawn_in_own_session
+            if sys.version_info[:2] == (3, 11):     # fork_exec's arguments are 3.11's
+                mp_util.spawnv_passfds = _spawn_in_own_session
+            mp_spawn.get_preparation_data = _preparation_without_main
             try:
                 super()._launch(process_obj)
             finally:
                 mp_util.spawnv_passfds = original
+                mp_spawn.get_preparation_data = _GET_PREPARATION_DATA
 
 
 class _SessionProcess(mp_context.SpawnProcess):
@@ -127,7 +145,7 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
 
     Raises:
         Whatever ``func`` raised in a worker, ``KeyboardInterrupt``, or
-        :class:`~vbn_common.errors.VbnCommonError` when a worker died: in every case
+        :class:`~landmark_db.errors.LandmarkDbError` when a worker died: in every case
         the workers are terminated and joined first.
     """
     results: list[Any] = []
@@ -154,7 +172,7 @@ def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: 
             except multiprocessing.TimeoutError:
                 dead = [w for w in workers_started if w.exitcode is not None]
                 if dead:
-                    raise VbnCommonError(
+                    raise LandmarkDbError(
                         f'a worker process died (exit code {dead[0].exitcode}) while '
                         f'computing {getattr(func, "__name__", func)}: out of memory?') \
                         from None
