@@ -4,10 +4,10 @@ from __future__ import annotations
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 import numpy as np
-from scipy.sparse import csgraph
+from scipy.sparse import csc_matrix, csgraph
 
 from landmark_db.decomposition import best as best_module
-from landmark_db.decomposition.problem import component_of, zero_problem
+from landmark_db.decomposition.problem import component_of, graph_ball, zero_problem
 from landmark_db.world import grid_world
 
 
@@ -83,3 +83,76 @@ def test_gather_slices_concatenates_the_selected_columns_in_order():
     entries, lengths = gather_slices(csc.indptr, csc.indices, np.array([2, 1, 0]))
     assert entries.tolist() == [1, 0, 2]
     assert lengths.tolist() == [1, 0, 2]
+
+
+def _dense_local_search(matrix, weight, chosen, budget):
+    """The local search scored densely: every candidate against every chosen region."""
+    chosen = chosen.copy()
+    dense = matrix.toarray()
+    while True:
+        idx = np.flatnonzero(chosen)
+        sub = dense[:, idx]
+        count = sub.sum(axis=1)
+        uncovered = weight[count == 0].sum()
+        single = sub * ((count == 1) * weight)[:, None]
+        loss = single.sum(axis=0)
+        if idx.size and uncovered + loss.min() <= budget:
+            chosen[idx[int(np.argmin(loss))]] = False
+            continue
+        if idx.size < 2:
+            return chosen
+        gain = dense.T @ single
+        gain_free = dense.T @ ((count == 0) * weight)
+        gain[idx, :] = -np.inf
+        gain_free[idx] = -np.inf
+        both = sub.T @ (sub * ((count == 2) * weight)[:, None])
+        useful = (gain > 0).astype(float)
+        pairs = np.triu(useful.T @ useful > 0, k=1)
+        move = None
+        for i in np.flatnonzero(pairs.any(axis=1)):  # the largest slack, smallest i first
+            js = np.flatnonzero(pairs[i])
+            need = uncovered + loss[i] + loss[js] + both[i, js] - budget
+            slack = gain[:, [i]] + gain[:, js] + gain_free[:, None] - need[None, :]
+            c, j = np.unravel_index(int(np.argmax(slack)), slack.shape)
+            if slack[c, j] >= 0 and (move is None or slack[c, j] > move[0]):
+                move = (slack[c, j], c, i, int(js[j]))
+        if move is not None:
+            chosen[idx[move[2]]] = chosen[idx[move[3]]] = False
+            chosen[move[1]] = True
+            continue
+        improvement = gain + gain_free[:, None] - loss[None, :]
+        c, i = np.unravel_index(int(np.argmax(improvement)), improvement.shape)
+        if improvement[c, i] <= 0.5:
+            return chosen
+        chosen[idx[i]] = False
+        chosen[c] = True
+
+
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_local_search_makes_the_moves_of_a_dense_scan(seed):
+    rng = np.random.default_rng(seed)
+    rows, sets = int(rng.integers(1, 40)), int(rng.integers(1, 25))
+    matrix = csc_matrix((rng.random((rows, sets)) < rng.uniform(0.05, 0.5)).astype(float))
+    weight = rng.integers(1, 4, rows).astype(float)
+    chosen = rng.random(sets) < rng.uniform(0.1, 1.0)
+    budget = float(rng.integers(0, 10))
+    got = best_module._local_search(matrix, weight, chosen, budget)
+    np.testing.assert_array_equal(got, _dense_local_search(matrix, weight, chosen, budget))
+    count = matrix[:, np.flatnonzero(got)].toarray().sum(axis=1)
+    start = matrix[:, np.flatnonzero(chosen)].toarray().sum(axis=1)
+    if weight[start == 0].sum() <= budget:  # a start within budget stays within it
+        assert weight[count == 0].sum() <= budget
+        assert got.sum() <= chosen.sum()
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), radius=st.integers(0, 6))
+def test_graph_ball_holds_the_poses_dijkstra_finds_within_the_radius(seed, radius):
+    world = _world(seed)
+    start = int(np.random.default_rng(seed).integers(world.n_poses))
+    poses, steps = graph_ball(world.adjacency, start, radius)
+    distance = csgraph.dijkstra(world.adjacency, indices=start, unweighted=True)
+    expected = np.flatnonzero(distance <= radius)
+    np.testing.assert_array_equal(poses, expected)
+    np.testing.assert_array_equal(steps, distance[expected].astype(int))

@@ -1,13 +1,16 @@
 """The exact 0-MORDP solver (set cover over maximal candidate regions, HiGHS MILP)."""
 from __future__ import annotations
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from landmark_db.decomposition import decompose, validate
 from landmark_db.decomposition.exact import candidate_regions
 from landmark_db.decomposition.problem import zero_problem
-from landmark_db.decomposition.set_cover import solve_set_cover
+from landmark_db.decomposition.set_cover import greedy_partial_cover, solve_set_cover
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
 
@@ -99,3 +102,32 @@ def test_set_cover_infeasible_and_budgeted():
     assert optimal and len(chosen) == 2
     with pytest.raises(LandmarkDbError, match='pose 3 lies in no candidate'):
         solve_set_cover(4, np.arange(4), sets[:2])
+
+
+def test_greedy_partial_cover_takes_the_heaviest_set_until_the_budget_is_met():
+    # Rows (weights 3, 1, 1, 2); sets {0, 1}, {1, 2}, {2, 3}, {3}.
+    matrix = sp.csc_matrix(np.array([[1, 0, 0, 0],
+                                     [1, 1, 0, 0],
+                                     [0, 1, 1, 0],
+                                     [0, 0, 1, 1]], dtype=float))
+    weight = np.array([3.0, 1.0, 1.0, 2.0])
+    # Set 0 covers 4; then set 2 covers rows 2 and 3 (3) where set 1 covers row 2 (1).
+    assert greedy_partial_cover(matrix, weight, 0.0).tolist() == [True, False, True, False]
+    assert greedy_partial_cover(matrix, weight, 3.0).tolist() == [True, False, False, False]
+    assert not greedy_partial_cover(matrix, weight, 7.0).any()
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_greedy_partial_cover_stays_within_its_budget(seed):
+    rng = np.random.default_rng(seed)
+    rows, sets = int(rng.integers(1, 30)), int(rng.integers(1, 20))
+    dense = rng.random((rows, sets)) < rng.uniform(0.05, 0.6)
+    weight = rng.integers(1, 5, rows).astype(float)
+    budget = float(rng.integers(0, 8))
+    chosen = greedy_partial_cover(sp.csc_matrix(dense.astype(float)), weight, budget)
+    uncovered = weight[~dense[:, chosen].any(axis=1)].sum()
+    coverable = weight[dense.any(axis=1)].sum()
+    assert uncovered <= max(budget, weight.sum() - coverable)
+    # Each set taken covered weight no earlier choice did.
+    assert chosen.sum() <= np.count_nonzero(dense[:, chosen].any(axis=1))

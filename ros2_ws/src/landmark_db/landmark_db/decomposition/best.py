@@ -52,18 +52,19 @@ from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from landmark_db.decomposition.bound import lower_bound
 from landmark_db.decomposition.problem import (
     ZeroProblem,
     ZeroRegion,
     gather_slices,
+    graph_ball,
     split_components,
 )
 from landmark_db.decomposition.redundancy import eliminate_redundant
 from landmark_db.decomposition.set_cover import (
     cover_matrix,
+    greedy_partial_cover,
     merge_identical_rows,
     relaxed_uncovered,
     solve_set_cover,
@@ -84,16 +85,24 @@ COVER_NODES = 2000  # the complete cover (sigma = 0): usually solved at the root
 # The budgeted LP relaxation is degenerate; on the simulator's worlds HiGHS's dual
 # simplex, without presolve, reaches an optimal vertex in about half the interior-point
 # method's time (with crossover). Which optimal vertex changes the start, not the
-# quality on average. Past LP_IPM_NONZEROS cover entries the simplex falls behind
-# (102k poses x 6.7k candidates, 1.1M entries: 79 s against the interior point's 12 s).
+# quality on average. Past GREEDY_START_NONZEROS entries of the (merged) cover matrix
+# the LP is slow whatever the method (102k poses x 6.7k candidates, 517k entries: dual
+# simplex 43 s, interior point 9 s), so the start is Chvatal's greedy cover instead:
+# after the local search and the merge rounds 6xx regions against the LP start's 617.
 LP_METHOD = 'highs-ds'
-LP_IPM_NONZEROS = 400_000
+GREEDY_START_NONZEROS = 100_000
 # Column generation: rounds and branch-and-bound nodes per pricing round.
 PRICING_ROUNDS = 40
 PRICING_NODES = 600_000  # over all rounds
 # Pricing searches bitsets over every pose; past this many poses a round costs
 # seconds and proves little, so best skips it (vbn decompose --bound still runs it).
 PRICING_MAX_POSES = 1000
+# Seeded candidates: at most a quarter of the poses and MAX_SEEDS seeds (on 102k poses
+# 8.4k seeds cost 8 s and saved 4 of 621 regions).
+MAX_SEEDS = 2000
+# From this many poses the algorithms run in worker processes (below it, starting the
+# processes costs more than it saves).
+PARALLEL_MIN_POSES = 20_000
 
 
 def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
@@ -110,7 +119,8 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
         time_limit: seconds for each set-cover MILP.
         multiplicity: stop seeding once every k-coverable pose lies in this many
             candidates.
-        max_seeds: most seeds to grow candidates from; default ``n_poses // 4``.
+        max_seeds: most seeds to grow candidates from; default ``n_poses // 4``
+            and at most ``MAX_SEEDS``.
         merge_rounds: rounds of merge candidates plus local search after the cover.
         pricing_rounds: column-generation rounds (:mod:`.bound`) that grow the pool
             with the candidates the cover's LP relaxation prices best, before a last
@@ -130,6 +140,7 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
     cache = _ComponentCache(problem)
     stop = check_stop if check_stop is not None else _no_stop
     results = _every_algorithm(problem, alpha, stop)
+    widest = results.pop(_WIDEST, [])
     # The reference: with sigma = 0 the algorithm with the fewest regions (all serve
     # every pose); under the sigma rule B.2, whose service best keeps (at least).
     reference = min(results.values(), key=len) if problem.sigma == 0 else results['B2']
@@ -139,9 +150,8 @@ def best_cover(problem: ZeroProblem, alpha: float = DECOMPOSITION.alpha,
     for regions in results.values():
         for region in regions:
             pool.add(cache.maximal(region))
-    if problem.sigma:
-        for region in shrink_regions(replace(problem, sigma=0), 'B2'):
-            pool.add(region)
+    for region in widest:  # B.2 with sigma = 0: every k-coverable pose in a candidate
+        pool.add(region)
     _add_seeded_candidates(problem, pool, cache, multiplicity, max_seeds, stop)
 
     required = np.flatnonzero(coverable)
@@ -216,24 +226,65 @@ def _no_stop() -> None:
 
 def _every_algorithm(problem: ZeroProblem, alpha: float,
                      stop: Callable[[], None] = _no_stop) -> dict[str, list[ZeroRegion]]:
-    """Run A.1, A.2, A.3, B.1, B.2 and C on the instance.
+    """Run A.1, A.2, A.3, B.1, B.2 and C on the instance (and B.2 with sigma = 0).
 
     Each gets its own copy of the tie-breaking generator, so that each gives what it
-    gives alone with that seed.
+    gives alone with that seed. From ``PARALLEL_MIN_POSES`` poses on they run in
+    worker processes, one per core (the results are the same: 102k poses, six
+    algorithms and B.2 with sigma = 0 in 9 s on two cores instead of 16 s).
     """
+    names = [name for name in _RUN_ORDER if name != _WIDEST or problem.sigma]
+    workers = min(len(names), _cores())
+    if problem.n_poses >= PARALLEL_MIN_POSES and workers > 1:
+        from landmark_db.workers import map_in_processes
+
+        runs = dict(zip(names, map_in_processes(_run_held, names, workers, initializer=_hold,
+                                                initargs=(problem, alpha), check_stop=stop)))
+    else:
+        runs = {}
+        for name in names:
+            stop()
+            runs[name] = _run_algorithm(problem, alpha, name)
+    # In this order ties go to B.2, B.1, A.1, A.2, A.3 and C.
+    return {name: runs[name] for name in _RESULT_ORDER if name in runs}
+
+
+# Longest first, so that the processes finish together (times on 102k poses).
+_WIDEST = 'B2 sigma 0'
+_RUN_ORDER = ('A2', 'A3', _WIDEST, 'C', 'A1', 'B2', 'B1')
+_RESULT_ORDER = ('B2', 'B1', 'A1', 'A2', 'A3', 'C', _WIDEST)
+_HELD: dict[str, Any] = {}
+
+
+def _cores() -> int:
+    import os
+
+    return len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else \
+        (os.cpu_count() or 1)
+
+
+def _hold(problem: ZeroProblem, alpha: float) -> None:
+    """Keep the instance in a worker (sent once per worker, not once per algorithm)."""
+    _HELD.update(problem=problem, alpha=alpha)
+
+
+def _run_held(name: str) -> list[ZeroRegion]:
+    return _run_algorithm(_HELD['problem'], _HELD['alpha'], name)
+
+
+def _run_algorithm(problem: ZeroProblem, alpha: float, name: str) -> list[ZeroRegion]:
+    """Run one algorithm on a copy of the instance's generator."""
     from landmark_db.decomposition.grow_regions import grow_regions
     from landmark_db.decomposition.neighbourhood_seeds import neighbourhood_seeds
 
-    results = {}
-    for name, run in (('B2', lambda p: shrink_regions(p, 'B2')),
-                      ('B1', lambda p: shrink_regions(p, 'B1')),
-                      ('A1', lambda p: grow_regions(p, 'A1')),
-                      ('A2', lambda p: grow_regions(p, 'A2')),
-                      ('A3', lambda p: grow_regions(p, 'A3')),
-                      ('C', lambda p: neighbourhood_seeds(p, alpha))):
-        stop()
-        results[name] = run(replace(problem, rng=copy.deepcopy(problem.rng)))
-    return results
+    own = replace(problem, rng=copy.deepcopy(problem.rng))
+    if name == _WIDEST:
+        return shrink_regions(replace(own, sigma=0), 'B2')
+    if name in ('B1', 'B2'):
+        return shrink_regions(own, name)
+    if name == 'C':
+        return neighbourhood_seeds(own, alpha)
+    return grow_regions(own, name)
 
 
 def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budget: int,
@@ -242,32 +293,42 @@ def _partial_cover(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budg
 
     With budget 0 this is one exact set-cover MILP. Otherwise the budgeted MILP is
     hard for HiGHS, so: the LP relaxation marks the poses worth giving up (relaxed
-    "uncovered" value y > 1/2), the rest are covered by a MILP over the LP's support,
-    and a local search on the budgeted problem improves that start (or B.2's own
-    solution, if the start leaves too much uncovered): drop a region while the budget
-    allows, replace two regions by one candidate, or swap one region for a candidate
-    that covers more (creating slack for drops).
+    "uncovered" value y > 1/2), the rest are covered by a MILP over the LP's support
+    (on a large pool, past ``GREEDY_START_NONZEROS``, the greedy partial cover starts
+    instead), and a local search on the budgeted problem improves that start (or
+    B.2's own solution, if the start leaves too much uncovered): drop a region while
+    the budget allows, replace two regions by one candidate, or swap one region for a
+    candidate that covers more (creating slack for drops).
     """
     n = problem.n_poses
     if budget == 0:
         return solve_set_cover(n, required, pool.poses, time_limit, node_limit=COVER_NODES)[0]
     matrix, weight = _merged_rows(n, required, pool.poses)
-    large = sum(poses.size for poses in pool.poses) > LP_IPM_NONZEROS
-    y, x = relaxed_uncovered(n, required, pool.poses, budget,
-                             method='highs-ipm' if large else LP_METHOD, presolve=large)
-    start = np.zeros(len(pool.poses), dtype=bool)
-    # Start: cover the poses the LP keeps, with the LP's support (and B.2's regions).
-    support = np.union1d(np.flatnonzero(x > 1e-6), pool.reference).astype(np.int64)
-    try:
-        chosen, _ = solve_set_cover(n, required[y <= 0.5], [pool.poses[i] for i in support],
-                                    time_limit, relative_gap=START_GAP, node_limit=START_NODES)
-        start[support[chosen]] = True
-    except LandmarkDbError:
-        pass
+    if matrix.nnz > GREEDY_START_NONZEROS:
+        start = greedy_partial_cover(matrix, weight, budget)
+    else:
+        start = _relaxed_start(problem, pool, required, budget, time_limit)
     if not start.any() or _uncovered_weight(matrix, weight, start) > budget:
         start[:] = False
         start[pool.reference] = True  # B.2's own solution is always within budget
     return np.flatnonzero(_local_search(matrix, weight, start, budget))
+
+
+def _relaxed_start(problem: ZeroProblem, pool: _Pool, required: np.ndarray, budget: int,
+                   time_limit: float) -> np.ndarray:
+    """Cover the poses the LP relaxation keeps, with the LP's support and B.2's regions."""
+    y, x = relaxed_uncovered(problem.n_poses, required, pool.poses, budget, method=LP_METHOD,
+                             presolve=False)
+    start = np.zeros(len(pool.poses), dtype=bool)
+    support = np.union1d(np.flatnonzero(x > 1e-6), pool.reference).astype(np.int64)
+    try:
+        chosen, _ = solve_set_cover(problem.n_poses, required[y <= 0.5],
+                                    [pool.poses[i] for i in support], time_limit,
+                                    relative_gap=START_GAP, node_limit=START_NODES)
+        start[support[chosen]] = True
+    except LandmarkDbError:
+        pass
+    return start
 
 
 def _add_merge_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCache,
@@ -338,15 +399,16 @@ def _uncovered_weight(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndar
 
 
 def _local_search(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndarray,
-                  budget: float, max_dense: float = 2e7) -> np.ndarray:
+                  budget: float) -> np.ndarray:
     """Improve a budgeted partial cover by drop, 2-for-1 and coverage-gaining swap moves.
 
     Every accepted move keeps the uncovered weight within ``budget`` and either
     lowers the region count or keeps it and strictly lowers the uncovered weight, so
-    the search terminates.
+    the search terminates. The moves are scored on sparse matrices (a candidate
+    overlaps few chosen regions): on 102k poses x 7k candidates a search takes 0.5 s
+    where a dense (candidates x regions) scoring took 7 s, with the same moves.
     """
     chosen = chosen.copy()
-    n_sets = matrix.shape[1]
     transposed = sp.csr_matrix(matrix.T)
     while True:
         idx = np.flatnonzero(chosen)
@@ -361,37 +423,104 @@ def _local_search(matrix: sp.csc_matrix, weight: np.ndarray, chosen: np.ndarray,
             if uncovered + loss[cheapest] <= budget:
                 chosen[idx[cheapest]] = False
                 continue
-        if d < 2 or n_sets * d > max_dense:
+        if d < 2:
             break
-        gain = (transposed @ single).toarray()  # candidate x region: weight regained
+        # gain[c, i]: the weight candidate c regains of the poses only region i covers
+        # (the chosen candidates' rows empty); gain_free[c]: of the uncovered poses.
+        gain = (sp.diags((~chosen).astype(np.float64)) @ transposed @ single).tocsr()
+        gain.eliminate_zeros()
+        gain.sort_indices()
         gain_free = transposed @ ((count == 0) * weight)
-        gain[idx, :] = -np.inf
         gain_free[idx] = -np.inf
-        both = (sub.T @ sp.diags((count == 2) * weight) @ sub).toarray()
-        # Only pairs some candidate regains poses from both can be merged.
-        useful = (gain > 0).astype(np.float64)
-        pairs = np.triu(useful.T @ useful > 0, k=1)
-        best = None
-        for i in np.flatnonzero(pairs.any(axis=1)):
-            js = np.flatnonzero(pairs[i])
-            need = uncovered + loss[i] + loss[js] + both[i, js] - budget
-            slack = gain[:, [i]] + gain[:, js] + gain_free[:, None] - need[None, :]
-            c, j = np.unravel_index(int(np.argmax(slack)), slack.shape)
-            if slack[c, j] >= 0 and (best is None or slack[c, j] > best[0]):
-                best = (slack[c, j], c, i, int(js[j]))
-        if best is not None:
-            _, c, i, j = best
+        both = (sub.T @ sp.diags((count == 2) * weight) @ sub).tocsr()
+        move = _two_for_one(gain, gain_free, loss, both, uncovered - budget)
+        if move is not None:
+            c, i, j = move
             chosen[idx[i]] = chosen[idx[j]] = False
             chosen[c] = True
             continue
-        improvement = gain + gain_free[:, None] - loss[None, :]
-        c, i = np.unravel_index(int(np.argmax(improvement)), improvement.shape)
-        if improvement[c, i] > 0.5:
+        swap = _swap(gain, gain_free, loss)
+        if swap is not None:
+            c, i = swap
             chosen[idx[i]] = False
             chosen[c] = True
             continue
         break
     return chosen
+
+
+def _two_for_one(gain: sp.csr_matrix, gain_free: np.ndarray, loss: np.ndarray,
+                 both: sp.csr_matrix, excess: float) -> tuple[int, int, int] | None:
+    """Return the best move (candidate c, regions i < j) replacing i and j by c, or None.
+
+    Only pairs that some candidate regains weight from both are tried. A move fits
+    when its slack, gain[c, i] + gain[c, j] + gain_free[c] - (loss[i] + loss[j] +
+    both[i, j] + ``excess``), is at least 0; the largest slack wins, then the smallest
+    i, candidate and j (the order of a dense scan over every candidate and pair).
+    Per pair, the best candidate is the best one gaining from both, or the best for i
+    (or j) alone, which gains nothing from the other: the per-pair maximum without a
+    dense (candidates x pairs) matrix.
+    """
+    rows, first, second = _row_pairs(gain)
+    if rows.size == 0:
+        return None
+    d = loss.size
+    value = gain.data[first] + gain.data[second] + gain_free[rows]
+    pair_key, inverse = np.unique(gain.indices[first] * d + gain.indices[second],
+                                  return_inverse=True)
+    pair_best = np.full(pair_key.size, -np.inf)
+    np.maximum.at(pair_best, inverse, value)
+    pi, pj = pair_key // d, pair_key % d
+    alone = np.full(d, float(gain_free.max()))  # a candidate gaining from neither
+    coo = gain.tocoo()
+    np.maximum.at(alone, coo.col, coo.data + gain_free[coo.row])
+    need = loss[pi] + loss[pj] + np.asarray(both[pi, pj]).ravel() + excess
+    slack = np.maximum(pair_best, np.maximum(alone[pi], alone[pj])) - need
+    fits = slack >= 0
+    if not fits.any():
+        return None
+    top = slack[fits].max()
+    i = int(pi[fits & (slack == top)].min())
+    # Region i's moves in full (one column of candidates per partner j).
+    js = pj[pi == i]
+    need_i = loss[i] + loss[js] + both[i].toarray().ravel()[js] + excess
+    scores = gain[:, [i]].toarray() + gain[:, js].toarray() + gain_free[:, None] - need_i
+    c, j = np.unravel_index(int(np.argmax(scores)), scores.shape)
+    return int(c), i, int(js[j])
+
+
+def _row_pairs(matrix: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return (row, entry a, entry b) for every two stored entries a < b of each row."""
+    per_row = np.diff(matrix.indptr)
+    multi = np.flatnonzero(per_row >= 2)
+    rows, first, second = [np.zeros(0, dtype=np.int64)], [np.zeros(0, dtype=np.int64)], \
+        [np.zeros(0, dtype=np.int64)]
+    for length in np.unique(per_row[multi]):
+        here = multi[per_row[multi] == length]
+        a, b = np.triu_indices(int(length), k=1)
+        start = matrix.indptr[here][:, None]
+        rows.append(np.repeat(here, a.size))
+        first.append((start + a).ravel())
+        second.append((start + b).ravel())
+    return np.concatenate(rows), np.concatenate(first), np.concatenate(second)
+
+
+def _swap(gain: sp.csr_matrix, gain_free: np.ndarray,
+          loss: np.ndarray) -> tuple[int, int] | None:
+    """Return the best swap (candidate c for region i) gaining more than 1/2, or None.
+
+    The gain of a swap is gain[c, i] + gain_free[c] - loss[i]; a candidate's best is
+    over its entries of ``gain`` or, off them, its free gain minus the smallest loss.
+    Ties: the smallest candidate, then the smallest region.
+    """
+    per_candidate = gain_free - loss.min()
+    coo = gain.tocoo()
+    np.maximum.at(per_candidate, coo.row, coo.data + gain_free[coo.row] - loss[coo.col])
+    top = per_candidate.max()
+    if not top > 0.5:
+        return None
+    c = int(np.flatnonzero(per_candidate == top)[0])
+    return c, int(np.argmax(gain[c].toarray().ravel() + gain_free[c] - loss))
 
 
 def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentCache,
@@ -403,7 +532,7 @@ def _add_seeded_candidates(problem: ZeroProblem, pool: _Pool, cache: _ComponentC
     sizes = np.array([poses.size for poses in pool.poses], dtype=float)
     typical = max(1, int(round(np.sqrt(np.median(sizes) / 2.0)))) if sizes.size else 1
     radii = sorted({max(1, typical // 2), typical, 2 * typical})
-    seeds_left = max_seeds if max_seeds is not None else max(1, n // 4)
+    seeds_left = max_seeds if max_seeds is not None else max(1, min(n // 4, MAX_SEEDS))
     seeded = np.zeros(n, dtype=bool)
     while seeds_left > 0:
         counts = pool.counts
@@ -484,10 +613,8 @@ def _grow_candidates(problem: ZeroProblem, seed: int, coverable: np.ndarray,
                      cache: _ComponentCache,
                      radii: list[int]) -> list[ZeroRegion]:
     """Return candidate regions around ``seed``, one per ball radius."""
-    distance = csgraph.dijkstra(cache.graph, indices=seed, unweighted=True,
-                                limit=max(radii) + 0.5)
-    near = np.flatnonzero(np.isfinite(distance) & coverable)
-    near_distance = distance[near]
+    ball, distance = graph_ball(problem.adjacency, seed, max(radii))
+    near, near_distance = ball[coverable[ball]], distance[coverable[ball]]
     allowed = problem.row_features(seed)
     # Dense (near poses x seed features) visibility: the ball variants' greedy steps
     # become column sums of a small boolean matrix.
@@ -527,8 +654,6 @@ class _ComponentCache:
     def __init__(self, problem: ZeroProblem) -> None:
         self.problem = problem
         self._pieces: dict[bytes, list[np.ndarray]] = {}
-        # float64 adjacency: csgraph would otherwise convert the bool matrix per call.
-        self.graph = sp.csr_matrix(problem.adjacency, dtype=np.float64)
 
     def maximal(self, region: ZeroRegion) -> ZeroRegion:
         """Return the maximal candidate holding ``region``.

@@ -21,13 +21,16 @@ limit. The LP relaxation is solved in polynomial time (interior point).
 """
 from __future__ import annotations
 
+import heapq
+
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, linprog, milp
 import scipy.sparse as sp
 
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['cover_matrix', 'merge_identical_rows', 'relaxed_uncovered', 'solve_set_cover']
+__all__ = ['cover_matrix', 'greedy_partial_cover', 'merge_identical_rows', 'relaxed_uncovered',
+           'solve_set_cover']
 
 
 def cover_matrix(n_poses: int, required: np.ndarray, sets: list[np.ndarray]) -> sp.csr_matrix:
@@ -184,3 +187,40 @@ def relaxed_uncovered(n_poses: int, required: np.ndarray, sets: list[np.ndarray]
     for value, rows in zip(result.x[n_sets:], members):
         y[rows] = value
     return y, result.x[:n_sets]
+
+
+def greedy_partial_cover(matrix: sp.csc_matrix, weight: np.ndarray, budget: float) -> np.ndarray:
+    """Chvatal's greedy set cover, stopped once at most ``budget`` weight is uncovered.
+
+    Repeatedly takes the set covering the most uncovered weight (ties: the lowest
+    index); scores are updated lazily (a set's score only falls, so a popped score
+    that is still exact is the maximum).
+
+    Args:
+        matrix: (rows x sets) 0/1 incidence matrix.
+        weight: each row's weight (its pose count after merging identical rows).
+        budget: most weight that may stay uncovered.
+
+    Returns:
+        Boolean mask of the chosen sets.
+    """
+    csc = sp.csc_matrix(matrix)
+    covered = np.zeros(csc.shape[0], dtype=bool)
+    score = np.asarray(csc.T @ weight).ravel()
+    heap = [(-float(value), j) for j, value in enumerate(score) if value > 0]
+    heapq.heapify(heap)
+    chosen = np.zeros(csc.shape[1], dtype=bool)
+    uncovered = float(weight.sum())
+    while uncovered > budget and heap:
+        negative, j = heapq.heappop(heap)
+        rows = csc.indices[csc.indptr[j]:csc.indptr[j + 1]]
+        rows = rows[~covered[rows]]
+        exact = float(weight[rows].sum())
+        if exact < -negative:
+            if exact > 0:
+                heapq.heappush(heap, (-exact, j))
+            continue
+        chosen[j] = True
+        covered[rows] = True
+        uncovered -= exact
+    return chosen
