@@ -156,3 +156,16 @@ def test_graph_ball_holds_the_poses_dijkstra_finds_within_the_radius(seed, radiu
     expected = np.flatnonzero(distance <= radius)
     np.testing.assert_array_equal(poses, expected)
     np.testing.assert_array_equal(steps, distance[expected].astype(int))
+
+
+def test_algorithms_in_worker_processes_give_what_they_give_in_process(monkeypatch):
+    problem = zero_problem(_world(10), 2, 1, 1, np.random.default_rng(3))  # 63 poses
+    alone = best_module._every_algorithm(problem, 0.85)
+    assert min(len(regions) for regions in alone.values()) >= 8
+    monkeypatch.setattr(best_module, 'PARALLEL_MIN_POSES', 0)
+    monkeypatch.setattr(best_module, '_cores', lambda: 2)
+    parallel = best_module._every_algorithm(problem, 0.85)
+    assert list(parallel) == list(alone) == ['B2', 'B1', 'A1', 'A2', 'A3', 'C', 'B2 sigma 0']
+    for name, regions in alone.items():
+        assert [(r.poses.tolist(), r.columns.tolist()) for r in parallel[name]] == \
+            [(r.poses.tolist(), r.columns.tolist()) for r in regions], name

@@ -88,7 +88,7 @@ COVER_NODES = 2000  # the complete cover (sigma = 0): usually solved at the root
 # quality on average. Past GREEDY_START_NONZEROS entries of the (merged) cover matrix
 # the LP is slow whatever the method (102k poses x 6.7k candidates, 517k entries: dual
 # simplex 43 s, interior point 9 s), so the start is Chvatal's greedy cover instead:
-# after the local search and the merge rounds 6xx regions against the LP start's 617.
+# after the local search and the merge rounds 634 regions against the LP start's 617.
 LP_METHOD = 'highs-ds'
 GREEDY_START_NONZEROS = 100_000
 # Column generation: rounds and branch-and-bound nodes per pricing round.
@@ -231,7 +231,7 @@ def _every_algorithm(problem: ZeroProblem, alpha: float,
     Each gets its own copy of the tie-breaking generator, so that each gives what it
     gives alone with that seed. From ``PARALLEL_MIN_POSES`` poses on they run in
     worker processes, one per core (the results are the same: 102k poses, six
-    algorithms and B.2 with sigma = 0 in 9 s on two cores instead of 16 s).
+    algorithms and B.2 with sigma = 0 in 10.9 s on two cores instead of 18.8 s).
     """
     names = [name for name in _RUN_ORDER if name != _WIDEST or problem.sigma]
     workers = min(len(names), _cores())
