@@ -7,6 +7,7 @@ import numpy as np
 from scipy.sparse import csc_matrix, csgraph
 
 from landmark_db.decomposition import best as best_module
+from landmark_db.decomposition import local_search as local_search_module
 from landmark_db.decomposition.problem import component_of, graph_ball, zero_problem
 from landmark_db.world import grid_world
 
@@ -137,7 +138,7 @@ def test_local_search_makes_the_moves_of_a_dense_scan(seed):
     weight = rng.integers(1, 4, rows).astype(float)
     chosen = rng.random(sets) < rng.uniform(0.1, 1.0)
     budget = float(rng.integers(0, 10))
-    got = best_module._local_search(matrix, weight, chosen, budget)
+    got = local_search_module.local_search(matrix, weight, chosen, budget)
     np.testing.assert_array_equal(got, _dense_local_search(matrix, weight, chosen, budget))
     count = matrix[:, np.flatnonzero(got)].toarray().sum(axis=1)
     start = matrix[:, np.flatnonzero(chosen)].toarray().sum(axis=1)
