@@ -142,6 +142,7 @@ def run(args: argparse.Namespace) -> int:
                         bags / 'room_exploration', args.build_set, log)
     effects = cache / 'room_run_effects'
     if not effects.exists():
+        cache.mkdir(parents=True, exist_ok=True)  # a fresh checkout has no cache/ yet
         _call(_RENDER_EFFECTS + ['--out', str(effects)], log)
     runs: dict[str, dict[str, Any]] = {}
     runs['room_run'] = _localize('room_run', room_db, bags / 'room_run', out, log, args)
