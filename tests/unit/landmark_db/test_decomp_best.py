@@ -164,7 +164,7 @@ def test_algorithms_in_worker_processes_give_what_they_give_in_process(monkeypat
     alone = best_module._every_algorithm(problem, 0.85)
     assert min(len(regions) for regions in alone.values()) >= 8
     monkeypatch.setattr(best_module, 'PARALLEL_MIN_POSES', 0)
-    monkeypatch.setattr(best_module, '_cores', lambda: 2)
+    monkeypatch.setattr(best_module, 'available_cores', lambda: 2)
     parallel = best_module._every_algorithm(problem, 0.85)
     assert list(parallel) == list(alone) == ['B2', 'B1', 'A1', 'A2', 'A3', 'C', 'B2 sigma 0']
     for name, regions in alone.items():

@@ -33,7 +33,7 @@ from typing import Any
 
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['map_in_processes']
+__all__ = ['available_cores', 'map_in_processes']
 
 #: How often the map checks that its workers are alive, seconds.
 _WATCH_S = 0.5
@@ -117,6 +117,13 @@ def _start_worker(initializer: Callable[..., None] | None, initargs: tuple) -> N
 def _run_chunk(job: tuple[Callable[[Any], Any], list[Any]]) -> list[Any]:
     func, chunk = job
     return [func(item) for item in chunk]
+
+
+def available_cores() -> int:
+    """Return the cores this process may run on (its affinity mask, else the machine's)."""
+    if hasattr(os, 'sched_getaffinity'):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
 
 
 def map_in_processes(func: Callable[[Any], Any], items: Iterable[Any], workers: int, *,

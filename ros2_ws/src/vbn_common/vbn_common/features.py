@@ -15,13 +15,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
-import os
 from typing import Any
 
 import cv2
 import numpy as np
 
-from landmark_db.workers import map_in_processes
+from landmark_db.workers import available_cores, map_in_processes
 from vbn_common.allocator import reuse_freed_memory
 from vbn_common.errors import VbnCommonError
 from vbn_common.images import EncodedImage, decode_image
@@ -194,7 +193,7 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
     Returns:
         Per image, its features, or the one-line reason it could not be decoded.
     """
-    workers = os.cpu_count() or 1 if workers is None else workers
+    workers = available_cores() if workers is None else workers
     if workers < 1:
         raise VbnCommonError(f'workers must be at least 1, got {workers}')
     results: list[ImageFeatures | str] = []

@@ -47,6 +47,7 @@ from landmark_db.database import (
 from landmark_db.database.build_info import utc_now_iso
 from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose, service
 from landmark_db.errors import LandmarkDbError
+from landmark_db.workers import available_cores
 from landmark_db.world import WorldInstance
 from vbn_common.exploration import Exploration, ReadConfig, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
@@ -140,7 +141,7 @@ class BuildConfig:
     @property
     def n_workers(self) -> int:
         """Processes to use."""
-        return self.workers or os.cpu_count() or 1
+        return self.workers or available_cores()
 
 
 _SECTIONS = ('read', 'sampling', 'sift', 'classes', 'verify', 'filters', 'decomposition',

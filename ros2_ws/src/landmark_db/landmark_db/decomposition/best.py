@@ -73,6 +73,7 @@ from landmark_db.decomposition.set_cover import (
 from landmark_db.decomposition.shrink_regions import shrink_regions
 from landmark_db.defaults import DECOMPOSITION
 from landmark_db.errors import LandmarkDbError
+from landmark_db.workers import available_cores, map_in_processes
 
 __all__ = ['best_cover']
 
@@ -235,10 +236,8 @@ def _every_algorithm(problem: ZeroProblem, alpha: float,
     algorithms and B.2 with sigma = 0 in 10.9 s on two cores instead of 18.8 s).
     """
     names = [name for name in _RUN_ORDER if name != _WIDEST or problem.sigma]
-    workers = min(len(names), _cores())
+    workers = min(len(names), available_cores())
     if problem.n_poses >= PARALLEL_MIN_POSES and workers > 1:
-        from landmark_db.workers import map_in_processes
-
         runs = dict(zip(names, map_in_processes(_run_held, names, workers, initializer=_hold,
                                                 initargs=(problem, alpha), check_stop=stop)))
     else:
@@ -255,13 +254,6 @@ _WIDEST = 'B2 sigma 0'
 _RUN_ORDER = ('A2', 'A3', _WIDEST, 'C', 'A1', 'B2', 'B1')
 _RESULT_ORDER = ('B2', 'B1', 'A1', 'A2', 'A3', 'C', _WIDEST)
 _HELD: dict[str, Any] = {}
-
-
-def _cores() -> int:
-    import os
-
-    return len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else \
-        (os.cpu_count() or 1)
 
 
 def _hold(problem: ZeroProblem, alpha: float) -> None:
