@@ -110,7 +110,8 @@ def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
     # most 1 cm and 95th percentile at most 5 cm, heading median at most 0.2 degree.
     image_stamps = {s for s, _ in run['images']}
     assert len(listener.poses) >= 0.98 * len(image_stamps), (
-        len(listener.poses), listener.status() if listener.diagnostics else None, node.output)
+        f'{len(listener.poses)} poses heard of {len(image_stamps)} frames; node diagnostics '
+        f'{listener.status() if listener.diagnostics else None}; output {node.output}')
     assert {p.header.frame_id for p in listener.poses} == {'map'}
     stamps, errors = pose_errors(listener, run['truth'])
     assert set(stamps) <= image_stamps
