@@ -1,6 +1,8 @@
 """The exact 0-MORDP solver (set cover over maximal candidate regions, HiGHS MILP)."""
 from __future__ import annotations
 
+import itertools
+
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -10,7 +12,11 @@ import scipy.sparse as sp
 from landmark_db.decomposition import decompose, validate
 from landmark_db.decomposition.exact import candidate_regions
 from landmark_db.decomposition.problem import zero_problem
-from landmark_db.decomposition.set_cover import greedy_partial_cover, solve_set_cover
+from landmark_db.decomposition.set_cover import (
+    greedy_partial_cover,
+    reduce_by_dominance,
+    solve_set_cover,
+)
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
 
@@ -131,3 +137,45 @@ def test_greedy_partial_cover_stays_within_its_budget(seed):
     assert uncovered <= max(budget, weight.sum() - coverable)
     # Each set taken covered weight no earlier choice did.
     assert chosen.sum() <= np.count_nonzero(dense[:, chosen].any(axis=1))
+
+
+def test_dominated_sets_and_implied_poses_are_removed():
+    # Rows are poses 0..3; sets {0, 1}, {0}, {1, 2, 3}, {2, 3}, {1, 2, 3} (a copy).
+    dense = np.array([[1, 1, 0, 0, 0],
+                      [1, 0, 1, 0, 1],
+                      [0, 0, 1, 1, 1],
+                      [0, 0, 1, 1, 1]])
+    reduced, columns, rows = reduce_by_dominance(sp.csr_matrix(dense))
+    # {0} lies in {0, 1}, {2, 3} in {1, 2, 3}, the copy goes (the lower index stays).
+    # Then pose 1 (sets 0 and 2) and pose 3 (set 2, like pose 2) are implied: covering
+    # pose 0 takes set 0, covering pose 2 set 2.
+    assert columns.tolist() == [0, 2] and rows.tolist() == [0, 2]
+    assert reduced.toarray().tolist() == [[1, 0], [0, 1]]
+    # A budgeted cover keeps every pose (any may be one of those left out).
+    _, columns, rows = reduce_by_dominance(sp.csr_matrix(dense), rows=False)
+    assert columns.tolist() == [0, 2] and rows.tolist() == [0, 1, 2, 3]
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_reductions_keep_the_optimum_cover(seed):
+    rng = np.random.default_rng(seed)
+    rows, sets = int(rng.integers(1, 14)), int(rng.integers(1, 12))
+    dense = rng.random((rows, sets)) < rng.uniform(0.1, 0.6)
+    dense[np.arange(rows), rng.integers(0, sets, rows)] = True    # every pose coverable
+    reduced, columns, kept = reduce_by_dominance(sp.csr_matrix(dense.astype(float)))
+    # The reduced problem keeps every remaining pose coverable and lists only original sets.
+    assert np.all(np.diff(reduced.indptr) > 0) and np.all(np.diff(columns) > 0)
+    assert np.array_equal(reduced.toarray() > 0, dense[np.ix_(kept, columns)])
+    # Brute force: the fewest sets covering every pose, before and after the reduction.
+    def fewest(matrix: np.ndarray) -> int:
+        for size in range(matrix.shape[1] + 1):
+            for combo in itertools.combinations(range(matrix.shape[1]), size):
+                if matrix[:, list(combo)].any(axis=1).all():
+                    return size
+        raise AssertionError('no cover')
+    assert fewest(reduced.toarray() > 0) == fewest(dense)
+    # solve_set_cover (which reduces) returns an optimum cover of the original.
+    chosen, optimal = solve_set_cover(rows, np.arange(rows),
+                                      [np.flatnonzero(dense[:, j]) for j in range(sets)])
+    assert optimal and dense[:, chosen].any(axis=1).all() and chosen.size == fewest(dense)
