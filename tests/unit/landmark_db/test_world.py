@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -81,7 +82,7 @@ def test_duplicate_ids_in_a_pose_are_merged():
     ({'poses': [[0, 'x']], 'edges': [], 'visible': [[]]}, 'numbers'),
     ({'poses': [[0, float('nan')]], 'edges': [], 'visible': [[]]}, 'non-finite'),
     ({'poses': [[0, float('inf')]], 'edges': [], 'visible': [[]]}, 'non-finite'),
-    ({'poses': [[0, 0, 0]], 'edges': [], 'visible': [[]]}, r'\[x, y\]'),
+    ({'poses': [[0, 0, 0, 0]], 'edges': [], 'visible': [[]]}, r'\[x, y\]'),
     ({'poses': [[0, 0]], 'edges': [], 'visible': [[-3]]}, 'negative feature id -3'),
     ({'poses': [[0, 0]], 'edges': [], 'visible': [[1.5]]}, 'integers'),
     ({'poses': [[0, 0]], 'edges': [], 'visible': [[], []]}, '1 poses but'),
@@ -116,3 +117,15 @@ def test_dict_round_trip_preserves_visibility(nx, ny, f, seed):
     for v in range(world.n_poses):
         expected = np.sort(ids[visible[v]])
         assert back.features_of(v).tolist() == expected.tolist()
+
+
+def test_a_pose_space_with_heading_has_one_pose_per_position_and_heading() -> None:
+    visible = np.eye(3, dtype=bool)
+    # Two headings at one position are two poses (issue 15's heading pose space).
+    world = WorldInstance.from_visibility([[0, 0, 0], [0, 0, math.pi / 4], [0.25, 0, 0]],
+                                          [[0, 1], [0, 2]], visible)
+    assert world.poses.shape == (3, 3)
+    with pytest.raises(LandmarkDbError, match=r'poses 0 and 1 are both at \(0, 0, 0\)'):
+        WorldInstance.from_visibility([[0, 0, 0], [0, 0, 0], [0.25, 0, 0]], [[0, 1]], visible)
+    with pytest.raises(LandmarkDbError, match=r'\[x, y\] \(or \[x, y, heading\]\)'):
+        WorldInstance.from_visibility([[0, 0, 0, 1]] * 3, [], visible)

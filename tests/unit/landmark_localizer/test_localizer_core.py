@@ -216,3 +216,26 @@ def test_coverage_split_by_the_database_regions(world) -> None:
     assert split['inside']['translation_median_m'] == pytest.approx(0.03)
     assert split['outside']['frames'] == 1
     assert split['outside']['translation_p95_m'] == pytest.approx(0.1)
+
+
+def test_heading_pose_space_weighs_a_turn_by_one_sector_as_one_grid_step() -> None:
+    import dataclasses
+
+    rng = np.random.default_rng(3)
+    db = synthetic_database(rng, wall_points(rng))
+    db = dataclasses.replace(db, info=dataclasses.replace(
+        db.info, parameters={**db.info.parameters, 'pose_headings': 8}))
+    index = DatabaseIndex(db)
+    assert index.headings == 8 and index.tree.m == 4
+    x, y = index.xy[0]
+    # Every stored pose has heading 0: a base pose at 45 degrees is one sector off, as
+    # far in the pose space as the next grid position; at 0 degrees it is on the pose.
+    pose, distance = index.nearest_pose([x, y, 0.0])
+    assert pose == 0 and distance == pytest.approx(0.0, abs=1e-12)
+    _, distance = index.nearest_pose([x, y, math.pi / 4])
+    assert distance == pytest.approx(index.spacing, rel=1e-9)
+    assert index.pose_points(np.array([[x, y, 0.0]])).shape == (1, 4)
+    # Within one spacing of (x, y, 0): the pose itself and its lattice neighbours only.
+    near = index.poses_near([x, y, 0.0], 1.01 * index.spacing)
+    assert 0 in near and np.all(np.linalg.norm(index.xy[near] - index.xy[0], axis=1)
+                                <= 1.01 * index.spacing)

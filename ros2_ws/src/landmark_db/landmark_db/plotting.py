@@ -47,7 +47,7 @@ def grid_cells(world: WorldInstance) -> tuple[np.ndarray, np.ndarray, float, np.
         cell size in metres (the world's spacing, or the shortest edge length) and
         the ``(2,)`` coordinates of cell ``(0, 0)``.
     """
-    poses = world.poses
+    poses = world.poses[:, :2]  # a pose space with heading: its positions
     spacing = world.spacing
     if not spacing:
         if len(world.edges):

@@ -11,7 +11,8 @@ of 100,000 poses seeing about 100 features each takes about 50 MB.
 Interchange JSON (fixed; other tools depend on it)::
 
     {
-      "poses":   [[x, y], ...],            # metres
+      "poses":   [[x, y], ...],            # metres ([x, y, heading], radians, in a
+                                         # pose space with heading)
       "edges":   [[i, j], ...],            # undirected, indices into poses
       "visible": [[feature_id, ...], ...], # visible[i]: feature ids seen from pose i
       "spacing": 0.5,                      # optional, metres between grid poses
@@ -53,7 +54,9 @@ class WorldInstance:
     :func:`load_world` or :func:`grid_world`; they validate their input.
 
     Attributes:
-        poses: ``(n, 2)`` float pose coordinates, metres.
+        poses: ``(n, 2)`` float pose coordinates, metres, or ``(n, 3)`` with a heading
+            (radians) in a pose space with heading (issue 15: a pose per position and
+            heading sector for cameras that do not see all around).
         edges: ``(m, 2)`` int pose index pairs of the undirected graph G.
         feature_ids: ``(f,)`` int64 feature ids, sorted and unique.
         visible: ``(n, f)`` boolean ``scipy.sparse.csr_matrix``; ``visible[v, j]`` is
@@ -359,8 +362,9 @@ def _check_poses(raw: Any) -> np.ndarray:
             raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers")
     if arr.size == 0:
         return np.zeros((0, 2), dtype=float)
-    if arr.ndim != 2 or arr.shape[1] != 2 or arr.dtype == object:
-        raise LandmarkDbError("world 'poses' must be a list of [x, y] points")
+    if arr.ndim != 2 or arr.shape[1] not in (2, 3) or arr.dtype == object:
+        raise LandmarkDbError("world 'poses' must be a list of [x, y] (or [x, y, heading]) "
+                              'points')
     try:
         arr = arr.astype(float)
     except (TypeError, ValueError):
@@ -374,9 +378,10 @@ def _check_poses(raw: Any) -> np.ndarray:
     if (counts > 1).any():
         twice = arr[first[np.argmax(counts > 1)]]
         same = np.flatnonzero((arr == twice).all(axis=1))
+        place = ', '.join(f'{v:g}' for v in twice)
         raise LandmarkDbError(
-            f'poses {int(same[0])} and {int(same[1])} are both at ({twice[0]:g}, '
-            f'{twice[1]:g}): a world has one pose per place (merge their visibility)')
+            f'poses {int(same[0])} and {int(same[1])} are both at ({place}): a world has '
+            'one pose per place (merge their visibility)')
     return arr
 
 

@@ -137,8 +137,17 @@ class DatabaseIndex:
         self.region_poses: sp.csr_matrix = database.region_poses.tocsr()  # (regions, poses)
         self.pose_regions: sp.csc_matrix = self.region_poses.tocsc()
         self.xy = np.asarray(database.poses.xy, float)
-        self.tree = cKDTree(self.xy)
-        self.spacing = float(database.poses.spacing or _median_spacing(self.tree, self.xy))
+        self.position_tree = cKDTree(self.xy)
+        self.spacing = float(database.poses.spacing or _median_spacing(self.position_tree,
+                                                                       self.xy))
+        # The pose space: positions, or (issue 15) positions and heading sectors. A
+        # heading h joins the position as r (cos h, sin h), with r such that the
+        # neighbouring sectors lie one grid spacing apart: distances, balls and nearest
+        # poses then weigh a turn by one sector like a step to a neighbouring position.
+        self.headings = int(database.info.parameters.get('pose_headings', 1) or 1)
+        self.heading_radius = 0.0 if self.headings == 1 else \
+            self.spacing / (2.0 * math.sin(math.pi / self.headings))
+        self.tree = cKDTree(self._embed(self.xy, np.asarray(database.poses.yaw, float)))
         adjacency = database.adjacency
         n = database.n_regions
         pairs = np.asarray(adjacency.pairs, np.int64).reshape(-1, 2)
@@ -259,10 +268,38 @@ class DatabaseIndex:
         col = self.pose_regions[:, pose]
         return col.indices if sp.issparse(col) else np.flatnonzero(col)
 
-    def nearest_pose(self, xy: np.ndarray) -> tuple[int, float]:
-        """Return the sampled pose nearest a position and its distance."""
-        distance, index = self.tree.query(np.asarray(xy, float)[:2])
+    def _embed(self, xy: np.ndarray, camera_heading: np.ndarray) -> np.ndarray:
+        if self.headings == 1:
+            return np.asarray(xy, float)
+        r = self.heading_radius
+        return np.column_stack([xy, r * np.cos(camera_heading), r * np.sin(camera_heading)])
+
+    def pose_points(self, base_poses: np.ndarray) -> np.ndarray:
+        """Return ``(n, 3)`` base poses ``(x, y, yaw)`` as points of the pose space.
+
+        ``(n, 2)`` positions without heading sectors; ``(n, 4)`` with them, from the
+        camera's heading (base yaw plus the mount's).
+        """
+        poses = np.asarray(base_poses, float).reshape(-1, 3)
+        return self._embed(poses[:, :2], poses[:, 2] + self.camera_mount[2])
+
+    def nearest_pose(self, pose: np.ndarray) -> tuple[int, float]:
+        """Return the sampled pose nearest a base pose ``(x, y, yaw)`` and its distance.
+
+        Without heading sectors only the position counts (a position alone will do).
+        """
+        pose = np.asarray(pose, float)
+        if self.headings == 1:
+            distance, index = self.tree.query(pose[:2])
+        else:
+            distance, index = self.tree.query(self.pose_points(pose[:3])[0])
         return int(index), float(distance)
+
+    def poses_near(self, pose: np.ndarray, radius: float) -> list[int]:
+        """Return the sampled poses within ``radius`` (metres in the pose space)."""
+        pose = np.asarray(pose, float)
+        point = pose[:2] if self.headings == 1 else self.pose_points(pose[:3])[0]
+        return list(self.tree.query_ball_point(point, r=radius))
 
     def project(self, camera_pose: np.ndarray, class_ids: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:

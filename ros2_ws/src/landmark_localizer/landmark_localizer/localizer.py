@@ -241,9 +241,10 @@ class Localizer:
         if self.hint is None:
             return None
         xy, radius = self.hint
-        poses = self.index.tree.query_ball_point(xy, r=radius)
+        # A position hint: every heading there.
+        poses = self.index.position_tree.query_ball_point(xy, r=radius)
         if not poses:
-            poses = [self.index.nearest_pose(xy)[0]]
+            poses = [int(self.index.position_tree.query(xy)[1])]
         return np.unique(self.index.region_poses[:, poses].tocoo().row)
 
     def _vote_global(self, image: np.ndarray, frame: Frame) -> str:
@@ -371,7 +372,7 @@ class Localizer:
         config = self.config
         current = base_pose(self.index, self.camera_pose)
         ahead = self.predictor.predict(current, config.predict_horizon_s)
-        target = choose_region(self.index, region, current[:2], ahead[:2],
+        target = choose_region(self.index, region, current, ahead,
                                config.border_margin,
                                _TrackedCounts(self.index, self.tracker.tracks.class_ids))
         if target is None:

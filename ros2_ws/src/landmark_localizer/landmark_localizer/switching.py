@@ -83,36 +83,41 @@ class MotionPredictor:
         return np.asarray(pose, float) + v * horizon_s
 
 
-def choose_region(index: DatabaseIndex, region: int, current_xy: np.ndarray,
-                  predicted_xy: np.ndarray, margin: float, tracked: Any
+def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
+                  predicted: np.ndarray, margin: float, tracked: Any
                   ) -> int | None:
     """Return the region to switch to before moving, or None to stay (module docstring).
 
     Args:
         index: The database index.
         region: The current region.
-        current_xy: The current position.
-        predicted_xy: The predicted position.
-        margin: "Near the border", in grid spacings.
+        current: The current base pose ``(x, y, yaw)``.
+        predicted: The predicted base pose.
+        margin: "Near the border", in grid spacings (a turn by one heading sector
+            counts as one spacing).
         tracked: Per region, how many of its features are tracked now (tie-breaker;
             anything with ``get(region, default)``).
     """
-    near = index.tree.query_ball_point(np.asarray(predicted_xy, float)[:2],
-                                       r=margin * index.spacing)
-    predicted_pose, _ = index.nearest_pose(predicted_xy)
+    # A position alone (enough without heading sectors) is a pose at heading 0.
+    current = np.r_[np.asarray(current, float)[:3], 0.0][:3]
+    predicted = np.r_[np.asarray(predicted, float)[:3], 0.0][:3]
+    near = index.poses_near(predicted, margin * index.spacing)
+    predicted_pose, _ = index.nearest_pose(predicted)
     near = np.union1d(np.asarray(near, np.int64), [predicted_pose])
     if index.region_contains(region, near).all():
         return None
-    current_pose, _ = index.nearest_pose(current_xy)
+    current_pose, _ = index.nearest_pose(current)
     both = np.intersect1d(index.regions_of_pose(current_pose),
                           index.regions_of_pose(predicted_pose))
     both = both[both != region]
     if both.size == 0:
         return None
     steps = np.linspace(0.0, 2.0, 9)[1:]
-    path = np.asarray(current_xy, float)[:2] + steps[:, None] * (
-        np.asarray(predicted_xy, float)[:2] - np.asarray(current_xy, float)[:2])
-    _, path_poses = index.tree.query(path)
+    delta = predicted - current
+    delta[2] = (delta[2] + np.pi) % (2 * np.pi) - np.pi
+    path = current + steps[:, None] * delta
+    _, path_poses = index.tree.query(index.pose_points(path) if index.headings > 1
+                                     else path[:, :2])
     scores = [(int(index.region_contains(r, path_poses).sum()), tracked.get(int(r), 0),
                -int(r)) for r in both]
     best = int(np.argmax([s[0] * 1000 + s[1] for s in scores]))

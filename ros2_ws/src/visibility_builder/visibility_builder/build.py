@@ -357,7 +357,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
     stages.begin('sample')
     sampling = sample_poses(exploration, config.sampling)
     stages.end(poses=sampling.n_poses, edges=int(len(sampling.edges)),
-               spacing=sampling.spacing, graph=sampling.graph)
+               spacing=sampling.spacing, graph=sampling.graph, headings=sampling.headings)
 
     stages.begin('features', f'{len(frames)} images on {config.n_workers} process(es)')
     results = extract_many([f.image for f in frames], config.sift, config.n_workers,
@@ -400,7 +400,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
                   for k, v in classes.stats.items()})
 
     stages.begin('filter')
-    filtered = retain_good_features(classes.visibility, sampling.grid, sampling.edges,
+    filtered = retain_good_features(classes.visibility, sampling.sector_grid(), sampling.edges,
                                     config.filters)
     visibility = filtered.visibility.tocsr().astype(bool)
     kept = np.asarray(filtered.kept_classes, np.int64)
@@ -413,7 +413,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
 
     stages.begin('decompose', f'{config.decomposition.algorithm}, k={config.decomposition.k}')
     spacing = sampling.spacing
-    world = WorldInstance.from_visibility(sampling.positions, sampling.edges, visibility,
+    world = WorldInstance.from_visibility(sampling.world_poses(), sampling.edges, visibility,
                                           spacing=spacing, name=str(exploration.path.name))
     per_pose = np.asarray(visibility.sum(axis=1)).ravel()
     dc = config.decomposition
@@ -545,6 +545,9 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
         frames=dict(exploration.frame_ids), sift=config.sift.as_dict(),
         parameters={**{k: v for k, v in flat_config(config).items()
                        if not k.startswith(('sift.', 'decomposition.'))},
+                    # Heading sectors of the pose space (1: positions only): the
+                    # localizer's pose lookups then weigh headings as well.
+                    'pose_headings': int(sampling.headings),
                     # The camera's planar pose on base_link (x, y, yaw): the localizer
                     # turns the camera pose it computes into base_link's with it.
                     'camera_mount': [round(float(v), 9) for v in compose_poses(

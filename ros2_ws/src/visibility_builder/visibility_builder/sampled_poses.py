@@ -29,6 +29,18 @@ Steps:
    between the poses are then defined everywhere. A lattice graph is left as it is
    (a gap in a grid is a wall or an obstacle), with a warning if it falls apart.
 
+**Heading pose space** (cameras that do not see all around; issue 15): a pinhole
+image sees a quarter of the room, so merging the headings of one position into one
+pose (the rule above) gives poses whose features no single image shows. With
+``headings`` sectors (``N``, or the exploration's own count of headings per position
+when 0 and the camera is not a panorama) a sampled pose is a (position, heading
+sector) pair: one image per pose, as the thesis's Chapter 3 assumes. ``G`` joins the
+poses of neighbouring positions in the same sector and the neighbouring sectors of
+one position (a turn by one sector is one step). Its rho-neighbourhoods then include
+turning, so neighbouring sectors must share features: at most half the field of
+view apart (eight sectors for a 90 degree pinhole). The decomposition runs on this
+graph unchanged. A panorama keeps the position-only pose space.
+
 Complexity: ``O(n log n)`` (k-d tree queries and sorts) for ``n`` frames.
 """
 from __future__ import annotations
@@ -66,6 +78,11 @@ class SamplingConfig:
             poses lie on it.
         connectivity: 4 or 8 lattice neighbours.
         knn: neighbours of each pose in the k-nearest-neighbour graph.
+        headings: heading sectors of the pose space: 1 (the default) for positions
+            only, 0 for the exploration's own count of headings per position (1 for a
+            panorama), N >= 2 for N sectors. The heading pose space is new and not yet
+            the default: on the pinhole room (8 headings, 90 degrees) no pose keeps
+            k = 8 filtered features over its rho = 1 neighbourhood.
     """
 
     position_tolerance: float = 0.02
@@ -73,6 +90,7 @@ class SamplingConfig:
     min_grid_fraction: float = 0.5
     connectivity: int = 4
     knn: int = 6
+    headings: int = 1
 
     def __post_init__(self) -> None:
         """Reject invalid values with a :class:`VisibilityBuilderError`."""
@@ -90,6 +108,9 @@ class SamplingConfig:
                 f'connectivity must be 4 or 8, got {self.connectivity}')
         if int(self.knn) != self.knn or self.knn < 1:
             raise VisibilityBuilderError(f'knn must be a positive integer, got {self.knn}')
+        if int(self.headings) != self.headings or not 0 <= self.headings <= 72:
+            raise VisibilityBuilderError(
+                f'headings must be an integer 0..72, got {self.headings}')
 
 
 @dataclass(frozen=True)
@@ -113,6 +134,9 @@ class PoseSampling:
         edges: ``(m, 2)`` int pose pairs ``i < j``, sorted, each once.
         graph: ``'grid4'``, ``'grid8'`` or ``'knn'``: how the edges were made
             (``'grid4'``/``'grid8'`` may include k-NN edges of off-lattice poses).
+        headings: heading sectors (1: the position-only pose space).
+        sector: ``(n,)`` int heading sector of each pose (0 with one sector); ``yaw``
+            is then the sector's centre heading.
     """
 
     positions: np.ndarray
@@ -124,11 +148,37 @@ class PoseSampling:
     angle: float | None
     edges: np.ndarray
     graph: str
+    headings: int = 1
+    sector: np.ndarray | None = None
 
     @property
     def n_poses(self) -> int:
         """Number of sampled poses."""
         return len(self.positions)
+
+    def world_poses(self) -> np.ndarray:
+        """Return the world instance's poses: positions, and headings if it has sectors.
+
+        ``(n, 2)``, or ``(n, 3)`` with each pose's sector heading.
+        """
+        if self.headings == 1:
+            return self.positions
+        return np.column_stack([self.positions, self.yaw])
+
+    def sector_grid(self) -> np.ndarray:
+        """Return each pose's lattice cell with every heading sector on a tile of its own.
+
+        The lattice filters of Section 6.2.2 (rings, blocks, convex trim) then work
+        within one heading: sector ``s`` is shifted by ``s`` tiles along the first
+        axis, two empty columns apart, so that no ring joins two sectors.
+        """
+        if self.headings == 1 or self.sector is None:
+            return self.grid
+        grid = self.grid.copy()
+        on = (grid >= 0).all(axis=1)
+        if on.any():
+            grid[on, 0] += self.sector[on] * (int(grid[on, 0].max()) + 3)
+        return grid
 
 
 def sample_poses(exploration: Any, config: SamplingConfig | None = None) -> PoseSampling:
@@ -162,6 +212,29 @@ def sample_poses(exploration: Any, config: SamplingConfig | None = None) -> Pose
     if not np.isfinite(base[:, :2]).all():
         raise VisibilityBuilderError('frame positions must be finite')
     labels = _group_positions(base[:, :2], config.position_tolerance)
+    headings = _heading_count(exploration, labels, camera[:, 2], config.headings)
+    if headings == 1:
+        return _position_poses(base, camera, labels, config)
+    return _heading_poses(base, camera, labels, headings, config)
+
+
+def _heading_count(exploration: Any, labels: np.ndarray, heading: np.ndarray,
+                   setting: int) -> int:
+    """Return the sectors of the pose space (1: positions only)."""
+    if setting:
+        return int(setting)
+    info = getattr(exploration, 'camera_info', None)
+    if info is None or getattr(info, 'distortion_model', '') == 'cylindrical':
+        return 1
+    # The exploration's own count: distinct headings (to a degree) per position, median.
+    degrees = np.rint(np.degrees(np.mod(heading, 2 * np.pi))).astype(np.int64) % 360
+    pairs = np.unique(np.stack([labels, degrees], axis=1), axis=0)
+    return int(np.median(np.bincount(pairs[:, 0])))
+
+
+def _position_poses(base: np.ndarray, camera: np.ndarray, labels: np.ndarray,
+                    config: SamplingConfig) -> PoseSampling:
+    """Section 6.2.1's pose space: one pose per position, all its frames together."""
     n = int(labels.max()) + 1
     order = np.argsort(labels, kind='stable')
     splits = np.flatnonzero(np.diff(labels[order])) + 1
@@ -175,7 +248,78 @@ def sample_poses(exploration: Any, config: SamplingConfig | None = None) -> Pose
         usual = int(np.argmax(sizes))
         _LOG.warning('%d of %d pose(s) have a number of frames other than the usual %d',
                      n - int(sizes[usual]), n, usual)
+    grid, spacing, origin, angle, edges, graph = _position_graph(positions, config)
+    _LOG.info('%d frames -> %d sampled poses; %s graph, %d edges, spacing %s', len(base), n,
+              graph, len(edges), 'none' if spacing is None else f'{spacing:.4f} m')
+    return PoseSampling(positions=positions, frames_of_pose=frames_of_pose, yaw=yaw, grid=grid,
+                        spacing=spacing, origin=origin, angle=angle, edges=edges, graph=graph,
+                        sector=np.zeros(n, dtype=np.int64))
 
+
+def _heading_poses(base: np.ndarray, camera: np.ndarray, labels: np.ndarray, headings: int,
+                   config: SamplingConfig) -> PoseSampling:
+    """Return the heading pose space: a pose per (position, heading sector) (module doc)."""
+    n_positions = int(labels.max()) + 1
+    counts = np.bincount(labels, minlength=n_positions)
+    centres = np.stack([np.bincount(labels, base[:, 0], n_positions),
+                        np.bincount(labels, base[:, 1], n_positions)], axis=1) / counts[:, None]
+    width = 2.0 * np.pi / headings
+    # Sectors centred on the exploration's headings: the circular mean of the headings
+    # modulo one sector width is the offset of sector 0.
+    folded = np.mod(camera[:, 2], width) * (2.0 * np.pi / width)
+    offset = float(np.arctan2(np.sin(folded).mean(), np.cos(folded).mean())) * width / (2 * np.pi)
+    sector = np.rint((camera[:, 2] - offset) / width).astype(np.int64) % headings
+    key = labels * headings + sector
+    # Poses in the order of their first frame.
+    unique_keys, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    rank = np.empty(len(unique_keys), dtype=np.int64)
+    rank[np.argsort(first, kind='stable')] = np.arange(len(unique_keys))
+    pose_of_frame = rank[inverse.reshape(-1)]
+    n = len(unique_keys)
+    pose_key = np.empty(n, dtype=np.int64)
+    pose_key[pose_of_frame] = key
+    pose_position, pose_sector = pose_key // headings, pose_key % headings
+    order = np.argsort(pose_of_frame, kind='stable')
+    splits = np.flatnonzero(np.diff(pose_of_frame[order])) + 1
+    frames_of_pose = tuple(tuple(int(i) for i in group) for group in np.split(order, splits))
+    several = sum(len(f) > 1 for f in frames_of_pose)
+    if several:
+        _LOG.warning('%d of %d (position, heading) pose(s) have several frames: they are '
+                     'merged', several, n)
+    grid_of_position, spacing, origin, angle, position_edges, graph = _position_graph(
+        centres, config)
+    # Poses by (position, sector), -1 where the exploration took no image.
+    table = np.full((n_positions, headings), -1, dtype=np.int64)
+    table[pose_position, pose_sector] = np.arange(n)
+    edges = []
+    for a, b in position_edges:           # same sector, neighbouring positions
+        both = (table[a] >= 0) & (table[b] >= 0)
+        edges.append(np.stack([table[a, both], table[b, both]], axis=1))
+    turn = table[:, (np.arange(headings) + 1) % headings] if headings > 2 else \
+        table[:, [1, 0]]
+    both = (table >= 0) & (turn >= 0)     # same position, neighbouring sectors
+    edges.append(np.stack([table[both], turn[both]], axis=1))
+    edges = _unique_edges(np.concatenate(edges).astype(np.int64))
+    n_components = _components(n, edges)[0]
+    if n_components > 1:
+        _LOG.warning('the pose graph (%s x %d headings) has %d connected components', graph,
+                     headings, n_components)
+    _LOG.info('%d frames -> %d sampled poses at %d positions x %d headings (%.0f degree '
+              'sectors); %s graph, %d edges, spacing %s', len(base), n, n_positions, headings,
+              np.degrees(width), graph, len(edges),
+              'none' if spacing is None else f'{spacing:.4f} m')
+    yaw = np.remainder(offset + width * pose_sector + np.pi, 2 * np.pi) - np.pi
+    return PoseSampling(positions=centres[pose_position], frames_of_pose=frames_of_pose,
+                        yaw=yaw, grid=grid_of_position[pose_position], spacing=spacing,
+                        origin=origin, angle=angle, edges=edges, graph=graph,
+                        headings=headings, sector=pose_sector)
+
+
+def _position_graph(positions: np.ndarray, config: SamplingConfig
+                    ) -> tuple[np.ndarray, float | None, np.ndarray | None, float | None,
+                               np.ndarray, str]:
+    """Return ``(grid, spacing, origin, angle, edges, graph)`` of positions (steps 2, 3)."""
+    n = len(positions)
     lattice = _fit_lattice(positions, config) if n >= 2 else None
     grid = np.full((n, 2), -1, dtype=np.int64)
     if lattice is None:
@@ -196,10 +340,7 @@ def sample_poses(exploration: Any, config: SamplingConfig | None = None) -> Pose
     n_components = _components(n, edges)[0]
     if n_components > 1:
         _LOG.warning('the pose graph (%s) has %d connected components', graph, n_components)
-    _LOG.info('%d frames -> %d sampled poses; %s graph, %d edges, spacing %s', len(base), n,
-              graph, len(edges), 'none' if spacing is None else f'{spacing:.4f} m')
-    return PoseSampling(positions=positions, frames_of_pose=frames_of_pose, yaw=yaw, grid=grid,
-                        spacing=spacing, origin=origin, angle=angle, edges=edges, graph=graph)
+    return grid, spacing, origin, angle, edges, graph
 
 
 def _group_positions(points: np.ndarray, tolerance: float) -> np.ndarray:

@@ -491,8 +491,11 @@ class LandmarkDatabase(ArrayEquality):
     def to_world_instance(self) -> WorldInstance:
         """Return the world instance: poses, G, and feature id ``c`` = class ``c``."""
         name = Path(self.info.source_bag).name if self.info.source_bag else ''
+        headings = int(self.info.parameters.get('pose_headings', 1) or 1)
+        poses = self.poses.xy if headings == 1 else np.column_stack([self.poses.xy,
+                                                                     self.poses.yaw])
         return WorldInstance.from_visibility(
-            self.poses.xy, self.poses.edges, self.classes.visibility,
+            poses, self.poses.edges, self.classes.visibility,
             feature_ids=np.arange(self.n_classes, dtype=np.int64),
             spacing=self.poses.spacing, name=name)
 

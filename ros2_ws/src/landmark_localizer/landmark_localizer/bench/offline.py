@@ -190,7 +190,9 @@ def coverage_split(result: OfflineRun, run: RunBag, index: DatabaseIndex
     truth = interpolate_poses(run.truth_stamps_ns, run.truth_poses, stamps)
     known = np.all(np.isfinite(truth), axis=1)
     covered_pose = np.asarray(index.region_poses.sum(axis=0)).ravel() > 0
-    distance, nearest = index.tree.query(np.where(known[:, None], truth[:, :2], 0.0))
+    where = np.where(known[:, None], truth, 0.0)
+    distance, nearest = index.tree.query(index.pose_points(where) if index.headings > 1
+                                         else where[:, :2])
     inside = known & covered_pose[nearest] & (distance <= index.spacing)
     poses = np.array([e.pose if e.pose is not None else np.full(3, np.nan)
                       for e in result.estimates], float).reshape(-1, 3)

@@ -39,6 +39,11 @@ def register(subparsers: Any) -> None:
                         help='image height (default 256 panoramic, 480 pinhole)')
     parser.add_argument('--hfov', type=float, default=90.0,
                         help='pinhole horizontal field of view, degrees (default 90)')
+    parser.add_argument('--headings', type=int, default=None,
+                        help='exploration: headings per position, evenly spaced (default 1 '
+                             'for panoramic, 4 for pinhole; a heading pose space, '
+                             'sampling.headings, needs them at most hfov / 2 apart: 8 at 90 '
+                             'degrees)')
     parser.add_argument('--encoding', choices=('bgr8', 'mono8'), default='bgr8',
                         help='image encoding (default bgr8)')
     parser.add_argument('--compressed', nargs='?', const='jpeg', choices=('jpeg', 'png'),
@@ -107,8 +112,8 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.speed) and args.speed > 0):
         raise VisibilityBuilderError(f'--speed must be positive, got {args.speed}')
     spec = BagSpec(kind=args.kind, camera=args.camera, width=args.width, height=args.height,
-                   hfov_deg=args.hfov, spacing=args.spacing, seed=args.seed,
-                   encoding=args.encoding, compression=args.compressed,
+                   hfov_deg=args.hfov, headings=args.headings, spacing=args.spacing,
+                   seed=args.seed, encoding=args.encoding, compression=args.compressed,
                    jpeg_quality=args.jpeg_quality, effects=effects,
                    run=RunParameters(max_speed=args.speed), duration=args.duration)
     last = [-1]

@@ -22,10 +22,10 @@ info and ground truth carry frame ``camera`` / ``map`` and the same stamp as
 their bag time; every header stamp equals the message's bag timestamp.
 
 Exploration: the robot stops at every pose of :func:`~.grid.exploration_poses`
-(one per second) and records one panorama at yaw 0, or four pinhole images at
-headings 0, 90, 180 and 270 degrees (0.25 s apart, turning in place), like the
-thesis's Room 408 data set (Section 8.3.2). Runs: :mod:`.trajectory`, images at
-10 Hz, odometry from :mod:`.odometry` at 50 Hz.
+(one per second) and records one panorama at yaw 0, or pinhole images at evenly
+spaced headings, turning in place (:func:`default_headings`: four, 0.25 s apart, like
+the thesis's Room 408 data set, Section 8.3.2; ``headings`` N gives N). Runs:
+:mod:`.trajectory`, images at 10 Hz, odometry from :mod:`.odometry` at 50 Hz.
 
 Everything is deterministic in the scene, the seed and the parameters: the bag
 clock starts at :data:`START_NS`, and every random draw comes from a generator
@@ -101,6 +101,7 @@ class BagSpec:
     width: int | None = None
     height: int | None = None
     hfov_deg: float = 90.0
+    headings: int | None = None
     spacing: float = 0.25
     clearance: float = 0.2
     seed: int = 0
@@ -129,6 +130,29 @@ class BagSpec:
             raise VisibilityBuilderError(f'spacing must be positive, got {self.spacing}')
         if self.seed < 0:
             raise VisibilityBuilderError(f'seed must be non-negative, got {self.seed}')
+        if self.headings is not None and not 1 <= int(self.headings) <= 72:
+            raise VisibilityBuilderError(f'headings must be 1..72, got {self.headings}')
+        if self.headings is not None and self.kind != 'exploration':
+            raise VisibilityBuilderError('headings are for explorations only')
+
+    def exploration_headings(self) -> int:
+        """Return the headings per exploration position (:func:`default_headings`)."""
+        if self.headings is not None:
+            return int(self.headings)
+        return default_headings(self.camera, self.hfov_deg)
+
+
+def default_headings(camera: str, hfov_deg: float) -> int:
+    """Return the exploration's headings per position for a camera: 1 for a panorama.
+
+    Otherwise 4, the thesis's Room 408 layout, whose images a build merges into one
+    pose per position (``sampling.headings`` 1). The heading pose space
+    (``sampling.headings`` 0 or N) joins neighbouring headings, which must then share
+    features: headings at most half the field of view apart, e.g. ``headings=8`` for a
+    90 degree pinhole (``hfov_deg`` is that field of view).
+    """
+    del hfov_deg  # the default does not depend on it (yet)
+    return 1 if camera == 'panoramic' else 4
 
 
 @dataclass
@@ -176,12 +200,13 @@ class _Bag:
 def _camera_frames(spec: BagSpec, scene: Scene) -> Iterator[tuple[int, np.ndarray]]:
     """Yield ``(stamp_ns, base pose)`` of every exploration image."""
     positions = exploration_poses(scene, spec.spacing, spec.clearance)
-    headings = [0.0] if spec.camera == 'panoramic' else [0.0, 0.5 * math.pi, math.pi,
-                                                         1.5 * math.pi]
+    count = spec.exploration_headings()
+    headings = [2.0 * math.pi * h / count for h in range(count)]
+    period = HEADING_PERIOD_NS if count <= 4 else POSE_PERIOD_NS // count
     for i, (x, y) in enumerate(positions):
         for h, heading in enumerate(headings):
             yaw = math.remainder(heading, 2 * math.pi)
-            yield START_NS + i * POSE_PERIOD_NS + h * HEADING_PERIOD_NS, np.array([x, y, yaw])
+            yield START_NS + i * POSE_PERIOD_NS + h * period, np.array([x, y, yaw])
 
 
 def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
