@@ -116,8 +116,7 @@ def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
     delta = predicted - current
     delta[2] = (delta[2] + np.pi) % (2 * np.pi) - np.pi
     path = current + steps[:, None] * delta
-    _, path_poses = index.tree.query(index.pose_points(path) if index.headings > 1
-                                     else path[:, :2])
+    _, path_poses = index.tree.query(index.pose_points(path))
     scores = [(int(index.region_contains(r, path_poses).sum()), tracked.get(int(r), 0),
                -int(r)) for r in both]
     best = int(np.argmax([s[0] * 1000 + s[1] for s in scores]))

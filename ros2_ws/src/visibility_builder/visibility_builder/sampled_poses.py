@@ -295,8 +295,7 @@ def _heading_poses(base: np.ndarray, camera: np.ndarray, labels: np.ndarray, hea
     for a, b in position_edges:           # same sector, neighbouring positions
         both = (table[a] >= 0) & (table[b] >= 0)
         edges.append(np.stack([table[a, both], table[b, both]], axis=1))
-    turn = table[:, (np.arange(headings) + 1) % headings] if headings > 2 else \
-        table[:, [1, 0]]
+    turn = table[:, (np.arange(headings) + 1) % headings]
     both = (table >= 0) & (turn >= 0)     # same position, neighbouring sectors
     edges.append(np.stack([table[both], turn[both]], axis=1))
     edges = _unique_edges(np.concatenate(edges).astype(np.int64))

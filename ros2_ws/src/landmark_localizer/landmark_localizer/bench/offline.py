@@ -191,8 +191,7 @@ def coverage_split(result: OfflineRun, run: RunBag, index: DatabaseIndex
     known = np.all(np.isfinite(truth), axis=1)
     covered_pose = np.asarray(index.region_poses.sum(axis=0)).ravel() > 0
     where = np.where(known[:, None], truth, 0.0)
-    distance, nearest = index.tree.query(index.pose_points(where) if index.headings > 1
-                                         else where[:, :2])
+    distance, nearest = index.tree.query(index.pose_points(where))
     inside = known & covered_pose[nearest] & (distance <= index.spacing)
     poses = np.array([e.pose if e.pose is not None else np.full(3, np.nan)
                       for e in result.estimates], float).reshape(-1, 3)

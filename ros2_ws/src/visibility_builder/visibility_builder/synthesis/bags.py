@@ -139,19 +139,18 @@ class BagSpec:
         """Return the headings per exploration position (:func:`default_headings`)."""
         if self.headings is not None:
             return int(self.headings)
-        return default_headings(self.camera, self.hfov_deg)
+        return default_headings(self.camera)
 
 
-def default_headings(camera: str, hfov_deg: float) -> int:
+def default_headings(camera: str) -> int:
     """Return the exploration's headings per position for a camera: 1 for a panorama.
 
     Otherwise 4, the thesis's Room 408 layout, whose images a build merges into one
     pose per position (``sampling.headings`` 1). The heading pose space
     (``sampling.headings`` 0 or N) joins neighbouring headings, which must then share
     features: headings at most half the field of view apart, e.g. ``headings=8`` for a
-    90 degree pinhole (``hfov_deg`` is that field of view).
+    90 degree pinhole.
     """
-    del hfov_deg  # the default does not depend on it (yet)
     return 1 if camera == 'panoramic' else 4
 
 
