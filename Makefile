@@ -70,6 +70,8 @@ SAMPLE_BAGS := \
 # Larger bags, generated on demand into the ignored cache/ folder.
 CACHE_BAGS := \
   'room_exploration_pinhole|--scene room --kind exploration --camera pinhole --spacing 0.25 --compressed' \
+  'room_exploration_pinhole8|--scene room --kind exploration --camera pinhole --headings 8 --compressed' \
+  'room_run_pinhole|--scene room --kind run --camera pinhole --compressed' \
   'floor_exploration|--scene floor --kind exploration --camera panoramic --spacing 0.25 --compressed' \
   'floor_run|--scene floor --kind run --camera panoramic --compressed'
 

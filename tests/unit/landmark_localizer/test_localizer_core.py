@@ -239,3 +239,36 @@ def test_heading_pose_space_weighs_a_turn_by_one_sector_as_one_grid_step() -> No
     near = index.poses_near([x, y, 0.0], 1.01 * index.spacing)
     assert 0 in near and np.all(np.linalg.norm(index.xy[near] - index.xy[0], axis=1)
                                 <= 1.01 * index.spacing)
+
+
+def test_a_turn_into_the_next_heading_sector_switches_to_a_region_of_that_sector() -> None:
+    """Sectors share no region (the pose graph has no turning edge): a turn must switch."""
+    import dataclasses
+
+    from landmark_db.database.model import SampledPoses
+
+    rng = np.random.default_rng(4)
+    db = synthetic_database(rng, wall_points(rng))
+    xy, n = db.poses.xy, len(db.poses.xy)
+    poses = SampledPoses(xy=np.vstack([xy, xy]), yaw=np.r_[np.zeros(n), np.full(n, math.pi / 4)],
+                         grid=np.vstack([db.poses.grid, db.poses.grid]),
+                         edges=np.vstack([db.poses.edges, db.poses.edges + n]), spacing=0.5)
+    first, second = db.regions
+    regions = (dataclasses.replace(first, poses=np.arange(n)),          # sector 0, all of it
+               dataclasses.replace(second, poses=np.arange(n, 2 * n)))  # sector 1, all of it
+    import scipy.sparse as sp
+    classes = dataclasses.replace(db.classes, visibility=sp.vstack(
+        [db.classes.visibility, db.classes.visibility]).tocsr())
+    db = dataclasses.replace(db, poses=poses, regions=regions, classes=classes,
+                             info=dataclasses.replace(
+        db.info, parameters={**db.info.parameters, 'pose_headings': 8}))
+    index = DatabaseIndex(db)
+    assert not index.same_sector(0, n) and index.same_sector(0, 1)
+    here = np.array([2.0, 1.5, 0.05])
+    # Driving straight on in sector 0: region 0 holds the way ahead, no switch.
+    assert choose_region(index, 0, here, here + [0.3, 0.0, 0.0], 1.0, {}) is None
+    # Turning left by 40 degrees: the predicted pose lies in sector 1, which only region 1
+    # holds; no region holds both poses, and the switch goes there before the turn.
+    assert choose_region(index, 0, here, here + [0.0, 0.0, math.radians(40)], 1.0, {}) == 1
+    # Back the other way from sector 1 into sector 0.
+    assert choose_region(index, 1, here + [0, 0, math.pi / 4], here, 1.0, {}) == 0

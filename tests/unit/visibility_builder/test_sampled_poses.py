@@ -236,7 +236,7 @@ def test_pinhole_exploration_bag_four_headings_as_one_pose(tmp_path: Path) -> No
                    compression='jpeg', encoding='mono8', headings=4)
     write_bag(resolve_scene('room'), spec, tmp_path / 'pin')
     exploration = read_exploration(tmp_path / 'pin')
-    sampling = sample_poses(exploration)   # positions only, the default
+    sampling = sample_poses(exploration, SamplingConfig(headings=1))   # positions only
     n = sampling.n_poses
     assert len(exploration.frames) == 4 * n and n >= 4 and sampling.headings == 1
     assert sampling.frames_of_pose == tuple(tuple(range(4 * k, 4 * k + 4)) for k in range(n))
@@ -248,13 +248,13 @@ def test_pinhole_exploration_bag_four_headings_as_one_pose(tmp_path: Path) -> No
 
 
 def test_pinhole_exploration_bag_gives_a_heading_pose_space(tmp_path: Path) -> None:
-    # Eight headings of a 90 degree pinhole, the exploration's own count (headings=0): a
-    # pose per (position, heading).
+    # Eight headings of a 90 degree pinhole, the exploration's own count (headings=0, the
+    # default): a pose per (position, heading).
     spec = BagSpec(kind='exploration', camera='pinhole', width=32, height=24, spacing=1.5,
                    compression='jpeg', encoding='mono8', headings=8)
     write_bag(resolve_scene('room'), spec, tmp_path / 'pin')
     exploration = read_exploration(tmp_path / 'pin')
-    sampling = sample_poses(exploration, SamplingConfig(headings=0))
+    sampling = sample_poses(exploration)
     n = sampling.n_poses
     assert sampling.headings == 8 and len(exploration.frames) == n and n % 8 == 0
     assert sampling.frames_of_pose == tuple((k,) for k in range(n))
@@ -263,13 +263,11 @@ def test_pinhole_exploration_bag_gives_a_heading_pose_space(tmp_path: Path) -> N
     assert sampling.sector.tolist() == [k % 8 for k in range(n)]
     positions = sample_poses(exploration, SamplingConfig(headings=1))
     assert positions.n_poses == n // 8
-    # Each lattice edge once per heading, and a ring of eight turns at each position.
-    assert len(sampling.edges) == 8 * len(positions.edges) + n
+    # Each lattice edge once per heading, and no turn: every sector a layer of its own.
+    assert len(sampling.edges) == 8 * len(positions.edges)
     a, b = sampling.edges.T
-    same_place = np.all(sampling.positions[a] == sampling.positions[b], axis=1)
-    turn = (sampling.sector[a] - sampling.sector[b]) % 8
-    assert np.all(np.isin(turn[same_place], [1, 7])) and np.all(turn[~same_place] == 0)
-    assert np.linalg.norm(sampling.positions[a[~same_place]] - sampling.positions[
-        b[~same_place]], axis=1) == pytest.approx(1.5, abs=1e-9)
+    assert np.all(sampling.sector[a] == sampling.sector[b])
+    assert np.linalg.norm(sampling.positions[a] - sampling.positions[b],
+                          axis=1) == pytest.approx(1.5, abs=1e-9)
     assert sampling.grid.tolist() == np.repeat(positions.grid, 8, axis=0).tolist()
     assert_well_formed(sampling)

@@ -147,7 +147,8 @@ class DatabaseIndex:
         self.headings = int(database.info.parameters.get('pose_headings', 1) or 1)
         self.heading_radius = 0.0 if self.headings == 1 else \
             self.spacing / (2.0 * math.sin(math.pi / self.headings))
-        self.tree = cKDTree(self._embed(self.xy, np.asarray(database.poses.yaw, float)))
+        self.yaw = np.asarray(database.poses.yaw, float)
+        self.tree = cKDTree(self._embed(self.xy, self.yaw))
         adjacency = database.adjacency
         n = database.n_regions
         pairs = np.asarray(adjacency.pairs, np.int64).reshape(-1, 2)
@@ -267,6 +268,13 @@ class DatabaseIndex:
         """Region indices containing the pose."""
         col = self.pose_regions[:, pose]
         return col.indices if sp.issparse(col) else np.flatnonzero(col)
+
+    def same_sector(self, a: int, b: int) -> bool:
+        """Whether two sampled poses lie in one heading sector (always without sectors)."""
+        if self.headings == 1:
+            return True
+        turn = (self.yaw[a] - self.yaw[b] + math.pi) % (2 * math.pi) - math.pi
+        return abs(turn) < math.pi / self.headings
 
     def _embed(self, xy: np.ndarray, camera_heading: np.ndarray) -> np.ndarray:
         if self.headings == 1:

@@ -15,6 +15,12 @@ history of estimated poses (constant velocity over the last half second).
 means a sampled pose outside the region within ``border_margin`` grid spacings of the
 predicted position; the path is sampled from the current position to twice the
 prediction, and each candidate scores the samples whose nearest pose it contains.
+
+In a heading pose space (pinhole cameras) the sectors of a position are not joined by
+an edge of the pose graph, so no region holds two sectors and a turn into the next
+sector has no region "containing both positions": the candidates are then the regions
+of the predicted pose, and the switch happens while the current region still gives the
+pose (the turn's make before break).
 """
 from __future__ import annotations
 
@@ -107,9 +113,11 @@ def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
     if index.region_contains(region, near).all():
         return None
     current_pose, _ = index.nearest_pose(current)
-    both = np.intersect1d(index.regions_of_pose(current_pose),
-                          index.regions_of_pose(predicted_pose))
+    ahead = index.regions_of_pose(predicted_pose)
+    both = np.intersect1d(index.regions_of_pose(current_pose), ahead)
     both = both[both != region]
+    if both.size == 0 and not index.same_sector(current_pose, predicted_pose):
+        both = ahead[ahead != region]   # a turn into the next sector (module docstring)
     if both.size == 0:
         return None
     steps = np.linspace(0.0, 2.0, 9)[1:]

@@ -33,13 +33,16 @@ Steps:
 image sees a quarter of the room, so merging the headings of one position into one
 pose (the rule above) gives poses whose features no single image shows. With
 ``headings`` sectors (``N``, or the exploration's own count of headings per position
-when 0 and the camera is not a panorama) a sampled pose is a (position, heading
-sector) pair: one image per pose, as the thesis's Chapter 3 assumes. ``G`` joins the
-poses of neighbouring positions in the same sector and the neighbouring sectors of
-one position (a turn by one sector is one step). Its rho-neighbourhoods then include
-turning, so neighbouring sectors must share features: at most half the field of
-view apart (eight sectors for a 90 degree pinhole). The decomposition runs on this
-graph unchanged. A panorama keeps the position-only pose space.
+when 0, the default, and the camera is not a panorama) a sampled pose is a (position,
+heading sector) pair: one image per pose, as the thesis's Chapter 3 assumes. ``G``
+joins the poses of neighbouring positions in the same sector: each sector is a layer
+of its own, and rho-neighbourhoods are translations. A turn is not an edge of ``G``:
+with it, the rho = 1 neighbourhood of a pose spans its two neighbouring sectors, and a
+feature would have to lie in three views two sector widths apart (with eight sectors of
+a 90 degree pinhole, only the view's centre line; no pose of the pinhole room keeps
+k = 8 features). The localizer crosses a sector by switching to a region of the
+predicted heading (:func:`landmark_localizer.switching.choose_region`). A panorama
+keeps the position-only pose space.
 
 Complexity: ``O(n log n)`` (k-d tree queries and sorts) for ``n`` frames.
 """
@@ -78,11 +81,10 @@ class SamplingConfig:
             poses lie on it.
         connectivity: 4 or 8 lattice neighbours.
         knn: neighbours of each pose in the k-nearest-neighbour graph.
-        headings: heading sectors of the pose space: 1 (the default) for positions
-            only, 0 for the exploration's own count of headings per position (1 for a
-            panorama), N >= 2 for N sectors. The heading pose space is new and not yet
-            the default: on the pinhole room (8 headings, 90 degrees) no pose keeps
-            k = 8 filtered features over its rho = 1 neighbourhood.
+        headings: heading sectors of the pose space: 0 (the default) for the
+            exploration's own count of headings per position (1 for a panorama), 1 for
+            positions only (all headings of a position one pose, Section 6.2.1), N >= 2
+            for N sectors.
     """
 
     position_tolerance: float = 0.02
@@ -90,7 +92,7 @@ class SamplingConfig:
     min_grid_fraction: float = 0.5
     connectivity: int = 4
     knn: int = 6
-    headings: int = 1
+    headings: int = 0
 
     def __post_init__(self) -> None:
         """Reject invalid values with a :class:`VisibilityBuilderError`."""
@@ -291,16 +293,13 @@ def _heading_poses(base: np.ndarray, camera: np.ndarray, labels: np.ndarray, hea
     # Poses by (position, sector), -1 where the exploration took no image.
     table = np.full((n_positions, headings), -1, dtype=np.int64)
     table[pose_position, pose_sector] = np.arange(n)
-    edges = []
+    edges = [np.empty((0, 2), dtype=np.int64)]
     for a, b in position_edges:           # same sector, neighbouring positions
         both = (table[a] >= 0) & (table[b] >= 0)
         edges.append(np.stack([table[a, both], table[b, both]], axis=1))
-    turn = table[:, (np.arange(headings) + 1) % headings]
-    both = (table >= 0) & (turn >= 0)     # same position, neighbouring sectors
-    edges.append(np.stack([table[both], turn[both]], axis=1))
     edges = _unique_edges(np.concatenate(edges).astype(np.int64))
     n_components = _components(n, edges)[0]
-    if n_components > 1:
+    if n_components > headings:
         _LOG.warning('the pose graph (%s x %d headings) has %d connected components', graph,
                      headings, n_components)
     _LOG.info('%d frames -> %d sampled poses at %d positions x %d headings (%.0f degree '

@@ -41,9 +41,9 @@ def register(subparsers: Any) -> None:
                         help='pinhole horizontal field of view, degrees (default 90)')
     parser.add_argument('--headings', type=int, default=None,
                         help='exploration: headings per position, evenly spaced (default 1 '
-                             'for panoramic, 4 for pinhole; a heading pose space, '
-                             'sampling.headings, needs them at most hfov / 2 apart: 8 at 90 '
-                             'degrees)')
+                             'for panoramic, 4 for pinhole; the builder makes a pose per '
+                             'heading, and neighbouring headings share more features the '
+                             'closer they are: 8 at 90 degrees)')
     parser.add_argument('--encoding', choices=('bgr8', 'mono8'), default='bgr8',
                         help='image encoding (default bgr8)')
     parser.add_argument('--compressed', nargs='?', const='jpeg', choices=('jpeg', 'png'),
