@@ -111,10 +111,19 @@ def test_camera_mismatch() -> None:
     assert 'pinhole' in camera_mismatch(camera_info(pinhole), panorama)
     shifted = camera_info(PanoramicCamera(1024, 256, y0=100.0))
     assert 'cy 100' in camera_mismatch(shifted, panorama)
+    # A lens the database was not built with: named with its coefficients.
     distorted = camera_info(pinhole)
     distorted.d = [0.1, 0.0, 0.0, 0.0, 0.0]
-    assert camera_mismatch(distorted, pinhole).startswith(
-        'CameraInfo cannot be used')
+    assert camera_mismatch(distorted, pinhole) == (
+        'CameraInfo 1024x256 pinhole (fx 512, fy 512, cx 511.5, cy 127.5, plumb_bob '
+        'd=[0.1, 0, 0, 0, 0]) does not match the database camera 1024x256 pinhole (fx 512, '
+        'fy 512, cx 511.5, cy 127.5)')
+    lens = PinholeCamera(1024, 256, pinhole.fx, pinhole.fy, pinhole.cx, pinhole.cy,
+                         distortion_model='plumb_bob', d=(0.1, 0.0, 0.0, 0.0, 0.0))
+    assert camera_mismatch(distorted, lens) == ''
+    distorted.d = [0.1, 0.0, 0.0, 0.0]   # four coefficients for plumb_bob
+    assert camera_mismatch(distorted, lens).startswith(
+        'CameraInfo cannot be used (plumb_bob distortion takes 5 coefficients, got 4)')
 
 
 def test_diagnostic_array() -> None:

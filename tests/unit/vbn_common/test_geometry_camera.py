@@ -76,7 +76,7 @@ def test_pinhole_unproject_then_project_recovers_the_pixel(u, v, depth):
 
 def test_bad_camera_parameters_are_refused():
     with pytest.raises(VbnCommonError):
-        make_camera('fisheye')
+        make_camera('catadioptric')
     with pytest.raises(VbnCommonError):
         PanoramicCamera(4, 256)
     with pytest.raises(VbnCommonError):
@@ -168,8 +168,10 @@ def _info(**changes):
 
 
 @pytest.mark.parametrize(('changes', 'message'), [
-    ({'distortion_model': 'equidistant'}, 'unknown camera info distortion_model'),
-    ({'d': (0.1, 0.0, 0.0, 0.0, 0.0)}, 'distortion must be zero'),
+    ({'distortion_model': 'kannala_brandt'}, 'unknown camera info distortion_model'),
+    ({'distortion_model': 'equidistant'}, 'equidistant distortion takes 4 coefficients'),
+    ({'d': (0.1, float('nan'), 0.0, 0.0, 0.0)}, 'must be finite'),
+    ({'d': (0.1, 0.0, 0.0)}, 'plumb_bob distortion takes 5 coefficients, got 3'),
     ({'k': (320.0, 0.0, 319.5)}, 'k must hold 9 finite numbers'),
     ({'k': (320.0, 1.0, 319.5, 0.0, 320.0, 239.5, 0.0, 0.0, 1.0)}, 'k must be'),
     ({'k': (0.0, 0.0, 319.5, 0.0, 320.0, 239.5, 0.0, 0.0, 1.0)}, 'focal lengths'),

@@ -292,7 +292,7 @@ class _Stages:
 
 def _camera_intrinsics(exploration: Exploration) -> CameraIntrinsics:
     info = exploration.camera_info
-    kind = 'panoramic' if info.distortion_model == 'cylindrical' else 'pinhole'
+    kind = camera_from_info(info).kind
     return CameraIntrinsics(kind=kind, width=info.width, height=info.height,
                             K=np.asarray(info.k, float).reshape(3, 3),
                             D=np.asarray(info.d, float), distortion_model=info.distortion_model,

@@ -29,7 +29,7 @@ from landmark_db.errors import LandmarkDbError
 __all__ = ['CAMERA_KINDS', 'POSE_SOURCES', 'BuildInfo', 'CameraIntrinsics', 'utc_now_iso']
 
 
-CAMERA_KINDS = ('panoramic', 'pinhole')
+CAMERA_KINDS = ('panoramic', 'pinhole', 'fisheye')
 POSE_SOURCES = ('ground_truth', 'tf', 'estimated')
 
 

@@ -12,8 +12,13 @@ Pixel coordinates follow OpenCV: the centre of pixel ``(u, v)`` (column, row) is
 the integer coordinates ``(u, v)``.
 
 **Pinhole** (Section 7.5.1): ``u = cx + fx X / Z``, ``v = cy + fy Y / Z``; the
-``sensor_msgs/CameraInfo`` carries ``distortion_model = 'plumb_bob'`` with zero
-distortion and ``K = [fx, 0, cx; 0, fy, cy; 0, 0, 1]``.
+``sensor_msgs/CameraInfo`` carries ``K = [fx, 0, cx; 0, fy, cy; 0, 0, 1]`` and
+``distortion_model = 'plumb_bob'`` or ``'rational_polynomial'``, whose coefficients
+``d`` (:mod:`.lens`) distort the normalised coordinates before ``K``. Keypoints become
+undistorted rays (:meth:`~CameraModel.unproject`); images are never undistorted.
+
+**Fisheye** (:class:`~vbn_common.geometry.fisheye.FisheyeCamera`, ``'equidistant'``):
+OpenCV's fisheye model, up to 200 degrees across.
 
 **Cylindrical panorama** (Section 7.5.2): a 360-degree image on a vertical
 cylinder around the optical centre.
@@ -52,6 +57,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from vbn_common.errors import VbnCommonError
+from vbn_common.geometry import lens
 
 __all__ = [
     'CameraInfoFields',
@@ -297,12 +303,32 @@ class PinholeCamera(CameraModel):
     cx: float
     cy: float
     kind: str = 'pinhole'
+    distortion_model: str = 'plumb_bob'
+    d: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         _check_size(self.width, self.height)
         if not (self.fx > 0 and self.fy > 0):
             raise VbnCommonError(
                 f'pinhole focal lengths must be positive, got fx={self.fx}, fy={self.fy}')
+        d = _coefficients(self.distortion_model, self.d, lens.BROWN_MODELS)
+        object.__setattr__(self, 'd', d)
+        object.__setattr__(self, '_limit', lens.brown_limit(np.asarray(d)) if any(d) else
+                           math.inf)
+
+    @property
+    def distorted(self) -> bool:
+        """Whether any distortion coefficient is non-zero."""
+        return any(self.d)
+
+    @property
+    def k_matrix(self) -> np.ndarray:
+        """Return the ``(3, 3)`` intrinsic matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    def undistorted(self) -> PinholeCamera:
+        """Return the same camera without distortion (the renderer's ideal view)."""
+        return PinholeCamera(self.width, self.height, self.fx, self.fy, self.cx, self.cy)
 
     @staticmethod
     def from_fov(width: int, height: int, hfov_deg: float = 90.0) -> PinholeCamera:
@@ -330,48 +356,98 @@ class PinholeCamera(CameraModel):
         return self.fy
 
     def column_geometry(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Return azimuth ``atan((u - cx) / fx)`` and depth factor ``cos(alpha)``."""
+        """Return azimuth ``atan((u - cx) / fx)`` and depth factor ``cos(alpha)``.
+
+        Raises:
+            VbnCommonError: a distorted camera (a column is no vertical line; render
+                through :meth:`undistorted` and a remap).
+        """
+        if self.distorted:
+            raise VbnCommonError('a distorted pinhole camera has no column geometry')
         alpha = np.arctan((np.asarray(u, dtype=float) - self.cx) / self.fx)
         return alpha, np.cos(alpha)
 
+    def unproject(self, uv: np.ndarray) -> np.ndarray:
+        """Return unit optical-frame rays of pixels, undistorted (:mod:`.lens`)."""
+        if not self.distorted:
+            return super().unproject(uv)
+        xy = lens.brown_undistort(uv, self.k_matrix, np.asarray(self.d))
+        rays = np.column_stack([xy, np.ones(len(xy))])
+        return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
     def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Project optical-frame points with ``u = cx + fx X / Z``, ``v = cy + fy Y / Z``."""
+        """Project optical-frame points with ``u = cx + fx xd``, ``v = cy + fy yd``.
+
+        ``(xd, yd)`` is ``(X / Z, Y / Z)`` distorted; points beyond the radius where the
+        distortion stops growing (:func:`~.lens.brown_limit`) are invalid.
+        """
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         z = points[:, 2]
         with np.errstate(divide='ignore', invalid='ignore'):
-            uv = np.stack([self.cx + self.fx * points[:, 0] / z,
-                           self.cy + self.fy * points[:, 1] / z], axis=1)
-        return uv, (z > 0) & self._inside(uv)
+            x, y = points[:, 0] / z, points[:, 1] / z
+            valid = z > 0
+            if self.distorted:
+                valid &= np.hypot(x, y) <= self._limit  # type: ignore[attr-defined]
+                x, y = lens.brown_distort(x, y, np.asarray(self.d))
+            uv = np.stack([self.cx + self.fx * x, self.cy + self.fy * y], axis=1)
+        return uv, valid & self._inside(uv)
 
     def camera_info(self) -> CameraInfoFields:
-        """Return ``'plumb_bob'`` CameraInfo fields with zero distortion."""
+        """Return the CameraInfo fields (zero ``plumb_bob`` distortion if none)."""
         fx, fy, cx, cy = self.fx, self.fy, self.cx, self.cy
         return CameraInfoFields(
-            width=self.width, height=self.height, distortion_model='plumb_bob',
-            d=(0.0, 0.0, 0.0, 0.0, 0.0),
+            width=self.width, height=self.height, distortion_model=self.distortion_model,
+            d=self.d or (0.0,) * lens.coefficient_count(self.distortion_model),
             k=(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0),
             r=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
             p=(fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0))
 
 
 def make_camera(kind: str, width: int | None = None, height: int | None = None,
-                hfov_deg: float = 90.0) -> CameraModel:
+                hfov_deg: float | None = None, distortion: tuple[str, tuple[float, ...]]
+                | None = None) -> CameraModel:
     """Build a camera by name with the project's default sizes.
 
     Args:
-        kind: ``'panoramic'`` (default 1024 x 256) or ``'pinhole'`` (default 640 x 480).
+        kind: ``'panoramic'`` (default 1024 x 256), ``'pinhole'`` or ``'fisheye'``
+            (default 640 x 480).
         width: image width, pixels, or ``None`` for the default.
         height: image height, pixels, or ``None`` for the default.
-        hfov_deg: pinhole horizontal field of view, degrees.
+        hfov_deg: horizontal field of view across the image width, degrees (default
+            90 pinhole, 180 fisheye).
+        distortion: ``(model, coefficients)``: ``plumb_bob`` or
+            ``rational_polynomial`` for a pinhole, ``equidistant`` for a fisheye
+            (whose focal length then makes the image width span ``hfov_deg``).
 
     Raises:
-        VbnCommonError: unknown kind or invalid size.
+        VbnCommonError: unknown kind, a distortion the kind cannot have, or invalid
+            size or coefficients.
     """
     if kind == 'panoramic':
+        if distortion is not None:
+            raise VbnCommonError('a panoramic camera has no lens distortion')
         return PanoramicCamera(width or 1024, height or 256)
     if kind == 'pinhole':
-        return PinholeCamera.from_fov(width or 640, height or 480, hfov_deg)
-    raise VbnCommonError(f'unknown camera model {kind!r} (expected panoramic or pinhole)')
+        camera = PinholeCamera.from_fov(width or 640, height or 480,
+                                        90.0 if hfov_deg is None else hfov_deg)
+        if distortion is None:
+            return camera
+        model, d = distortion
+        if model not in lens.BROWN_MODELS:
+            raise VbnCommonError(f'a pinhole camera takes plumb_bob or rational_polynomial '
+                                 f'distortion, got {model!r}')
+        return PinholeCamera(camera.width, camera.height, camera.fx, camera.fy, camera.cx,
+                             camera.cy, distortion_model=model, d=tuple(d))
+    if kind == 'fisheye':
+        from vbn_common.geometry.fisheye import FisheyeCamera
+        model, d = distortion if distortion is not None else ('equidistant', ())
+        if model != 'equidistant':
+            raise VbnCommonError(f'a fisheye camera takes equidistant distortion, '
+                                 f'got {model!r}')
+        return FisheyeCamera.from_fov(width or 640, height or 480,
+                                      180.0 if hfov_deg is None else hfov_deg, tuple(d))
+    raise VbnCommonError(f'unknown camera model {kind!r} (expected panoramic, pinhole or '
+                         f'fisheye)')
 
 
 def camera_from_info(info: CameraInfoLike) -> CameraModel:
@@ -381,9 +457,11 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
     ``k`` (duck-typed: rclpy and rosbags messages and :class:`CameraInfoFields`).
     ``'cylindrical'`` gives a :class:`PanoramicCamera` with ``K = [f_az, 0, cx; 0, f_y,
     y0; 0, 0, 1]``, where ``f_az = width / (2 pi)`` and ``cx = width / 2`` (a full
-    360-degree panorama, forward in the middle column); ``'plumb_bob'`` gives a
-    :class:`PinholeCamera` with ``K = [fx, 0, cx; 0, fy, cy; 0, 0, 1]``. Intrinsics
-    equal to a model's defaults come back as the defaults, so
+    360-degree panorama, forward in the middle column); ``'plumb_bob'`` and
+    ``'rational_polynomial'`` give a :class:`PinholeCamera`, ``'equidistant'`` a
+    :class:`~vbn_common.geometry.fisheye.FisheyeCamera`, each with ``K = [fx, 0, cx; 0,
+    fy, cy; 0, 0, 1]`` and its ``d`` (empty or the model's count). Intrinsics equal to
+    a model's defaults come back as the defaults, so
     ``camera_from_info(camera.camera_info()) == camera``.
 
     Args:
@@ -393,10 +471,10 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
         The camera model.
 
     Raises:
-        VbnCommonError: a missing attribute, an unknown distortion model,
-            non-zero distortion (the models are distortion-free: images must be
-            rectified), a malformed ``K``, a panorama that does not span 360 degrees
-            about its middle column, or an invalid image size.
+        VbnCommonError: a missing attribute, an unknown distortion model, a ``d``
+            of the wrong length or not finite, distortion on a panorama, a
+            malformed ``K`` (zeros, NaN, skew), a panorama that does not span 360
+            degrees about its middle column, or an invalid image size.
     """
     try:
         width_raw, height_raw = info.width, info.height
@@ -416,10 +494,10 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
     if k[1] != 0.0 or k[3] != 0.0 or tuple(k[6:]) != _IDENTITY_K_ROW3:
         raise VbnCommonError(f'camera info k must be [f, 0, c; 0, f, c; 0, 0, 1], '
                              f'got {k.tolist()}')
-    if np.any(d != 0.0):
-        raise VbnCommonError(f'camera info distortion must be zero (rectified '
-                             f'images), got d={d.tolist()}')
     if model == 'cylindrical':
+        if np.any(d != 0.0):
+            raise VbnCommonError(f'cylindrical camera info has no distortion, '
+                                 f'got d={d.tolist()}')
         camera = PanoramicCamera(width, height)
         if not (math.isclose(k[0], camera.f_az, rel_tol=1e-6)
                 and math.isclose(k[2], camera.cx, rel_tol=0.0, abs_tol=1e-6 * width)):
@@ -433,10 +511,28 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
             raise VbnCommonError(f'cylindrical camera info needs f_y = k[4] > 0, '
                                  f'got {f_y}')
         return PanoramicCamera(width, height, f_y=f_y, y0=y0)
-    if model == 'plumb_bob':
-        return PinholeCamera(width, height, float(k[0]), float(k[4]), float(k[2]), float(k[5]))
-    raise VbnCommonError(f'unknown camera info distortion_model {model!r} '
-                         f'(expected cylindrical or plumb_bob)')
+    intrinsics = (width, height, float(k[0]), float(k[4]), float(k[2]), float(k[5]))
+    if model in lens.BROWN_MODELS:
+        return PinholeCamera(*intrinsics, distortion_model=model, d=tuple(d.tolist()))
+    if model == 'equidistant':
+        from vbn_common.geometry.fisheye import FisheyeCamera
+        return FisheyeCamera(*intrinsics, d=tuple(d.tolist()))
+    raise VbnCommonError(f'unknown camera info distortion_model {model!r} (expected '
+                         f'cylindrical, plumb_bob, rational_polynomial or equidistant)')
+
+
+def _coefficients(model: str, d: Any, models: dict[str, int]) -> tuple[float, ...]:
+    """Return ``d`` as floats, checked against the model (empty: no distortion)."""
+    if model not in models:
+        raise VbnCommonError(f'unknown distortion model {model!r} (expected '
+                             f'{" or ".join(models)})')
+    values = tuple(float(v) for v in np.asarray(d, dtype=float).reshape(-1))
+    if values and len(values) != models[model]:
+        raise VbnCommonError(f'{model} distortion takes {models[model]} coefficients, '
+                             f'got {len(values)}')
+    if not all(math.isfinite(v) for v in values):
+        raise VbnCommonError(f'distortion coefficients must be finite, got {list(values)}')
+    return values if any(values) else ()
 
 
 def _image_size(width: Any, height: Any) -> tuple[int, int]:

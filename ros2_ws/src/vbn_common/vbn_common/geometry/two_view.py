@@ -70,11 +70,12 @@ _LOG = logging.getLogger(__name__)
 #: Names of the two-view methods of :func:`relative_motion`.
 METHODS = ('panoramic_planar', 'pinhole_planar', 'general_essential')
 #: Default method per camera kind (the database's camera model picks the method).
-DEFAULT_METHOD = {'panoramic': 'panoramic_planar', 'pinhole': 'pinhole_planar'}
+DEFAULT_METHOD = {'panoramic': 'panoramic_planar', 'pinhole': 'pinhole_planar',
+                  'fisheye': 'pinhole_planar'}
 
 
 def _focal(camera: CameraModel) -> float:
-    """Pixels per radian at the image centre (panorama: ``f_az``; pinhole: ``fx``)."""
+    """Pixels per radian at the image centre (panorama: ``f_az``; pinhole, fisheye: ``fx``)."""
     return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)
 
 
