@@ -155,6 +155,22 @@ def test_mcap_reader_decodes_the_same_messages(tmp_path, room):
     assert counts == {t: len(v) for t, v in expected.items() if t != '__types__'}
 
 
+def test_fisheye_exploration_carries_its_lens_to_the_builder(tmp_path, room):
+    from vbn_common.exploration import read_exploration
+    from vbn_common.geometry.camera import camera_from_info
+
+    spec = BagSpec(kind='exploration', camera='fisheye', width=96, height=72, hfov_deg=190.0,
+                   distortion=('equidistant', (0.02, -0.005, 0.001, 0.0)), spacing=1.5,
+                   headings=2, compression='jpeg', encoding='mono8')
+    write_bag(room, spec, tmp_path / 'fish')
+    info = _read(tmp_path / 'fish')['/camera/camera_info'][0][1]
+    assert info.distortion_model == 'equidistant'
+    assert list(info.d) == pytest.approx([0.02, -0.005, 0.001, 0.0])
+    exploration = read_exploration(tmp_path / 'fish')
+    assert camera_from_info(exploration.camera_info) == spec.camera_model()
+    assert len(exploration.frames) == 2 * len(exploration_poses(room, 1.5))
+
+
 def test_bad_input_is_one_line_errors(tmp_path, room, capsys):
     (tmp_path / 'exists').mkdir()
     with pytest.raises(VisibilityBuilderError, match='exists'):
@@ -166,10 +182,16 @@ def test_bad_input_is_one_line_errors(tmp_path, room, capsys):
     for argv in (['render', '--scene', 'no-such-scene', '--out', str(tmp_path / 'o')],
                  ['render', '--scene', str(bad), '--out', str(tmp_path / 'o')],
                  ['render', '--scene', 'room', '--out', str(tmp_path / 'exists')],
-                 ['render', '--scene', 'room', '--spacing', '-1', '--out', str(tmp_path / 'o')]):
+                 ['render', '--scene', 'room', '--spacing', '-1', '--out', str(tmp_path / 'o')],
+                 ['render', '--scene', 'room', '--camera', 'fisheye', '--distortion',
+                  'equidistant:0.1', '--out', str(tmp_path / 'o')]):
         assert vbn_main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith('vbn render: error:') and '\n' not in err
+    with pytest.raises(SystemExit, match='2'):   # argparse's own error
+        vbn_main(['render', '--scene', 'room', '--camera', 'pinhole', '--distortion',
+                  'plumb_bob:a,b', '--out', str(tmp_path / 'o')])
+    assert 'expected MODEL:c1,c2,... with numbers' in capsys.readouterr().err
     assert not (tmp_path / 'o').exists()
     assert not (tmp_path / 'x').exists()
 

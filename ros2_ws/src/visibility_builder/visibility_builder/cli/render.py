@@ -20,25 +20,34 @@ def register(subparsers: Any) -> None:
     parser = subparsers.add_parser(
         'render', help='render a scene into an exploration or run bag (MCAP)',
         description='Render a 2.5-D scene (walls extruded from a floor plan) through a '
-                    'panoramic or pinhole camera and write a rosbag2 MCAP bag: an '
+                    'panoramic, pinhole or fisheye camera (with lens distortion) and write '
+                    'a rosbag2 MCAP bag: an '
                     'exploration of every grid pose, a smooth run with odometry, or a run '
                     'with a kidnapping halfway.')
     parser.add_argument('--scene', required=True,
                         help='scene JSON file, or a shipped scene name (room, floor)')
     parser.add_argument('--kind', choices=('exploration', 'run', 'run-kidnapped'),
                         default='exploration', help='what the robot does (default exploration)')
-    parser.add_argument('--camera', choices=('panoramic', 'pinhole'), default='panoramic',
-                        help='camera model (default panoramic)')
+    parser.add_argument('--camera', choices=('panoramic', 'pinhole', 'fisheye'),
+                        default='panoramic',
+                        help='camera model (default panoramic; fisheye: equidistant)')
+    parser.add_argument('--distortion', type=_distortion, default=None,
+                        metavar='MODEL:c1,c2,...',
+                        help='lens distortion: plumb_bob:k1,k2,p1,p2,k3 or '
+                             'rational_polynomial:k1,k2,p1,p2,k3,k4,k5,k6 (pinhole), '
+                             'equidistant:k1,k2,k3,k4 (fisheye); images are rendered '
+                             'through it and CameraInfo carries it')
     parser.add_argument('--spacing', type=float, default=0.25,
                         help='exploration grid spacing in metres (default 0.25)')
     parser.add_argument('--seed', type=int, default=0,
                         help='seed of odometry noise and image effects (default 0)')
     parser.add_argument('--width', type=int, default=None,
-                        help='image width (default 1024 panoramic, 640 pinhole)')
+                        help='image width (default 1024 panoramic, 640 pinhole and fisheye)')
     parser.add_argument('--height', type=int, default=None,
-                        help='image height (default 256 panoramic, 480 pinhole)')
-    parser.add_argument('--hfov', type=float, default=90.0,
-                        help='pinhole horizontal field of view, degrees (default 90)')
+                        help='image height (default 256 panoramic, 480 pinhole and fisheye)')
+    parser.add_argument('--hfov', type=float, default=None,
+                        help='field of view across the image width, degrees (default 90 '
+                             'pinhole, 180 fisheye; a fisheye up to 220)')
     parser.add_argument('--headings', type=int, default=None,
                         help='exploration: headings per position, evenly spaced (default 1 '
                              'for panoramic, 4 for pinhole; the builder makes a pose per '
@@ -70,6 +79,19 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(func=run)
 
 
+def _distortion(text: str) -> tuple[str, tuple[float, ...]]:
+    """Parse ``MODEL:c1,c2,...`` (argparse type)."""
+    model, _, values = text.partition(':')
+    try:
+        coefficients = tuple(float(v) for v in values.split(',')) if values else ()
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'expected MODEL:c1,c2,... with numbers, got {text!r}') from None
+    if not model:
+        raise argparse.ArgumentTypeError(f'expected MODEL:c1,c2,..., got {text!r}')
+    return model, coefficients
+
+
 def run(args: argparse.Namespace) -> int:
     """Render the bag (or snapshot) that ``args`` describe."""
     import math
@@ -89,14 +111,15 @@ def run(args: argparse.Namespace) -> int:
         import cv2
 
         from vbn_common.geometry.camera import make_camera
-        from visibility_builder.render.renderer import Renderer
+        from visibility_builder.render.lens_view import make_renderer
 
         x, y, yaw_deg = args.snapshot
         pose = np.array([x, y, math.radians(yaw_deg)])
         if not scene.free_space(pose[None, :2])[0]:
             raise VisibilityBuilderError(f'snapshot pose ({x}, {y}) is not in free space')
-        camera = make_camera(args.camera, args.width, args.height, args.hfov)
-        image = Renderer(scene, camera).render(
+        camera = make_camera(args.camera, args.width, args.height, args.hfov,
+                             args.distortion)
+        image = make_renderer(scene, camera).render(
             pose, encoding=args.encoding, effects=effects,
             rng=np.random.default_rng(args.seed)).image
         out = Path(args.out)
@@ -112,7 +135,8 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.speed) and args.speed > 0):
         raise VisibilityBuilderError(f'--speed must be positive, got {args.speed}')
     spec = BagSpec(kind=args.kind, camera=args.camera, width=args.width, height=args.height,
-                   hfov_deg=args.hfov, headings=args.headings, spacing=args.spacing,
+                   hfov_deg=args.hfov, headings=args.headings, distortion=args.distortion,
+                   spacing=args.spacing,
                    seed=args.seed, encoding=args.encoding, compression=args.compressed,
                    jpeg_quality=args.jpeg_quality, effects=effects,
                    run=RunParameters(max_speed=args.speed), duration=args.duration)

@@ -44,11 +44,12 @@ import numpy as np
 from landmark_db.scene import Scene
 from vbn_common import names
 from vbn_common.bags import BagWriter, default_qos
-from vbn_common.geometry.camera import make_camera
+from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.camera import CameraModel, make_camera
 from vbn_common.geometry.frames import compose_poses, invert_pose
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects
-from visibility_builder.render.renderer import Renderer
+from visibility_builder.render.lens_view import make_renderer
 from visibility_builder.synthesis import messages
 from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
@@ -78,10 +79,14 @@ class BagSpec:
 
     Attributes:
         kind: ``'exploration'``, ``'run'`` or ``'run-kidnapped'``.
-        camera: ``'panoramic'`` or ``'pinhole'``.
+        camera: ``'panoramic'``, ``'pinhole'`` or ``'fisheye'``.
         width: image width, pixels (``None``: the camera's default).
         height: image height, pixels (``None``: the camera's default).
-        hfov_deg: pinhole horizontal field of view, degrees.
+        hfov_deg: horizontal field of view, degrees (``None``: 90 pinhole, 180
+            fisheye).
+        headings: exploration headings per position (``None``:
+            :func:`default_headings`).
+        distortion: ``(model, coefficients)`` of the lens (``None``: none).
         spacing: exploration grid spacing, metres.
         clearance: minimum distance from an exploration pose to a wall, metres.
         seed: seeds odometry noise and image effects.
@@ -100,8 +105,9 @@ class BagSpec:
     camera: str = 'panoramic'
     width: int | None = None
     height: int | None = None
-    hfov_deg: float = 90.0
+    hfov_deg: float | None = None
     headings: int | None = None
+    distortion: tuple[str, tuple[float, ...]] | None = None
     spacing: float = 0.25
     clearance: float = 0.2
     seed: int = 0
@@ -134,6 +140,15 @@ class BagSpec:
             raise VisibilityBuilderError(f'headings must be 1..72, got {self.headings}')
         if self.headings is not None and self.kind != 'exploration':
             raise VisibilityBuilderError('headings are for explorations only')
+        try:
+            self.camera_model()
+        except VbnCommonError as error:
+            raise VisibilityBuilderError(str(error)) from None
+
+    def camera_model(self) -> CameraModel:
+        """Return the camera the bag is rendered through."""
+        return make_camera(self.camera, self.width, self.height, self.hfov_deg,
+                           self.distortion)
 
     def exploration_headings(self) -> int:
         """Return the headings per exploration position (:func:`default_headings`)."""
@@ -229,7 +244,7 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     out = Path(out)
     if out.exists():
         raise VisibilityBuilderError(f'{out} exists already, not overwriting')
-    camera = make_camera(spec.camera, spec.width, spec.height, spec.hfov_deg)
+    camera = spec.camera_model()
     # Plan before opening the bag: bad input must leave nothing behind.
     if spec.kind == 'exploration':
         frames = list(_camera_frames(spec, scene))
@@ -239,7 +254,7 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
         if spec.kind == 'run-kidnapped':
             trajectory = kidnapped_trajectory(trajectory)
         frames = []
-    renderer = Renderer(scene, camera)
+    renderer = make_renderer(scene, camera)
     info = camera.camera_info()
     with BagWriter(out) as writer:
         bag = _Bag(writer, spec.compression is not None, trajectory is not None)
