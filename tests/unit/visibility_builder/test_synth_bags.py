@@ -211,3 +211,24 @@ def test_vbn_render_writes_a_bag_and_a_snapshot(tmp_path, capsys):
     assert cv2.imread(str(png)).shape == (60, 80, 3)
     assert vbn_main(['render', '--scene', 'room', '--snapshot', '1.3', '2.3', '0',
                      '--out', str(tmp_path / 'inside_table.png')]) == 2
+
+
+def test_a_tilted_mount_is_written_to_tf_static_and_read_back(tmp_path, room):
+    from vbn_common.exploration import read_exploration
+    from vbn_common.geometry.mount import TiltedCamera, tilt_angles
+
+    spec = BagSpec(kind='exploration', camera='pinhole', width=80, height=60, spacing=1.5,
+                   headings=1, camera_pitch_deg=2.0, camera_roll_deg=-1.0,
+                   camera_height=1.05, compression='jpeg', encoding='mono8')
+    write_bag(room, spec, tmp_path / 'tilted')
+    static = _read(tmp_path / 'tilted')['/tf_static'][0][1].transforms[0]
+    assert static.transform.translation.z == pytest.approx(1.05)
+    exploration = read_exploration(tmp_path / 'tilted')
+    assert tilt_angles(exploration.camera_tilt) == pytest.approx((2.0, -1.0), abs=1e-9)
+    camera = exploration.camera_model()
+    assert isinstance(camera, TiltedCamera) and camera.camera == spec.camera_model()
+    # The heading of the pitched optical axis is still the base's.
+    assert exploration.camera_poses()[:, 2] == pytest.approx(exploration.base_poses()[:, 2],
+                                                             abs=1e-9)
+    with pytest.raises(VisibilityBuilderError, match='pitch must be within 45'):
+        BagSpec(camera_pitch_deg=60.0).check()

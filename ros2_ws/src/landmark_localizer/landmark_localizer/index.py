@@ -33,6 +33,7 @@ from landmark_localizer.matching import grouped_nearest, squared_distances
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraModel, camera_from_info
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
+from vbn_common.geometry.mount import tilted
 
 __all__ = ['DatabaseIndex', 'RegionData', 'ViewData']
 
@@ -115,7 +116,9 @@ class DatabaseIndex:
         self.database = database
         self.k = int(database.info.k)
         try:
-            self.camera: CameraModel = camera_from_info(_CameraInfo(database.info.camera))
+            self.camera: CameraModel = tilted(
+                camera_from_info(_CameraInfo(database.info.camera)),
+                database.info.parameters.get('camera_tilt'))
         except VbnCommonError as error:
             raise LocalizerError(f'database camera: {error}') from None
         mount = database.info.parameters.get('camera_mount', [0.0, 0.0, 0.0])

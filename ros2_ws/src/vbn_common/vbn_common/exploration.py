@@ -59,6 +59,8 @@ import numpy as np
 
 from vbn_common.bags import open_bag
 from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.camera import CameraModel, camera_from_info
+from vbn_common.geometry.mount import level_tilt, tilt_angles, tilted
 from vbn_common.images import EncodedImage, ImageDecodeError, check_image
 from vbn_common.names import (
     BASE_FRAME,
@@ -219,6 +221,9 @@ class Exploration:
         skipped: frames skipped, by reason (every key of :data:`SKIP_REASONS`).
         warnings: the warnings given (also logged).
         path: the bag.
+        camera_tilt: ``(3, 3)`` pitch and roll of the camera on ``base_link``
+            (:mod:`vbn_common.geometry.mount`; ``ray_level = tilt @ ray_optical``),
+            from ``base_link -> camera``; ``None`` when level or unknown.
     """
 
     frames: tuple[Frame, ...]
@@ -229,6 +234,7 @@ class Exploration:
     skipped: dict[str, int]
     warnings: tuple[str, ...] = ()
     path: Path = field(default_factory=Path)
+    camera_tilt: np.ndarray | None = None
 
     def stamps_ns(self) -> np.ndarray:
         """Return the frames' stamps, ``(n,)`` int64 nanoseconds."""
@@ -242,15 +248,9 @@ class Exploration:
         """Return the frames' camera poses, ``(n, 3)`` ``(x, y, heading)``."""
         return np.array([f.camera_pose for f in self.frames], dtype=float).reshape(-1, 3)
 
-
-
-
-
-
-
-
-
-
+    def camera_model(self) -> CameraModel:
+        """Return the camera model of the camera info, with the mount's tilt if any."""
+        return tilted(camera_from_info(self.camera_info), self.camera_tilt)
 
 
 def _planar(pose: np.ndarray) -> tuple[float, float, float]:
@@ -463,6 +463,7 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         base_r, base_t, found = looked_up
         pose_topic = _TF
     base_to_camera = data.tf.lookup(config.base_frame, camera_frame, stamps, tolerance_ns)
+    camera_tilt = None
     if base_to_camera is None:
         warn(f'no transform {config.base_frame} -> {camera_frame} in /tf_static or /tf: '
              f'assuming the camera looks along {config.base_frame} +x from its origin')
@@ -473,6 +474,8 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         found &= cam_found
         camera_r, camera_t = compose_transforms((base_r, base_t), (cam_r, cam_t))
         axis = 2 if config.camera_forward_axis == 'z' else 0
+        if axis == 2:
+            camera_tilt = _mount_tilt(cam_r, cam_found, camera_frame, config, warn)
 
     base_yaw = np.arctan2(base_r[:, 1, 0], base_r[:, 0, 0])
     forward = camera_r[:, :, axis]
@@ -518,7 +521,32 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         frames=frames, camera_info=info, pose_source=source, frame_ids=frame_ids,
         topics={'image': image_topic, 'camera_info': config.camera_info_topic,
                 'pose': pose_topic},
-        skipped=skipped, warnings=tuple(warn.messages), path=path)
+        skipped=skipped, warnings=tuple(warn.messages), path=path, camera_tilt=camera_tilt)
+
+
+def _mount_tilt(rotations: np.ndarray, found: np.ndarray, camera_frame: str,
+                config: ReadConfig, warn: _Warnings) -> np.ndarray | None:
+    """Return the camera's pitch and roll on the base (``None``: level).
+
+    From the first frame's ``base_link -> camera``, with a warning if the last frame's
+    differs (the mount is taken as fixed).
+    """
+    usable = np.flatnonzero(found & np.isfinite(rotations).all(axis=(1, 2)))
+    if usable.size == 0:
+        return None
+    try:
+        tilts = [level_tilt(rotations[i]) for i in usable[[0, -1]]]
+    except VbnCommonError:
+        return None     # looking straight up or down: those frames are skipped as invalid
+    change = np.degrees(np.arccos(np.clip((np.trace(tilts[0].T @ tilts[1]) - 1) / 2, -1, 1)))
+    if change > 0.01:
+        warn(f'{config.base_frame} -> {camera_frame} changes during the bag (by '
+             f'{change:.2f} deg): using its first value')
+    pitch, roll = tilt_angles(tilts[0])
+    if max(abs(pitch), abs(roll)) < 1e-6:
+        return None
+    _LOG.info('camera mount: pitch %.3f deg, roll %.3f deg', pitch, roll)
+    return tilts[0]
 
 
 def _ground_truth(path: Path, data: _BagData, stamps: np.ndarray, tolerance_ns: int,

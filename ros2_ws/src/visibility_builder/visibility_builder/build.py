@@ -393,7 +393,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
         [np.concatenate([np.repeat(np.asarray([frames[i].camera_pose], float), len(features[i]),
                                    axis=0) for i in members])
          for members in sampling.frames_of_pose],
-        camera_from_info(exploration.camera_info), config.verify)
+        exploration.camera_model(), config.verify)
     sizes_before = np.asarray(classes.visibility.sum(axis=0)).ravel().astype(int)
     report.visibility_sizes_before = sizes_before
     stages.end(**{k: (int(v) if float(v).is_integer() else float(v))
@@ -548,6 +548,10 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
                     # Heading sectors of the pose space (1: positions only): the
                     # localizer's pose lookups then weigh headings as well.
                     'pose_headings': int(sampling.headings),
+                    # The camera's pitch and roll on base_link (ray_level = tilt @ ray),
+                    # from /tf_static; the localizer levels its rays with it.
+                    **({} if exploration.camera_tilt is None else {'camera_tilt': [
+                        round(float(v), 12) for v in np.ravel(exploration.camera_tilt)]}),
                     # The camera's planar pose on base_link (x, y, yaw): the localizer
                     # turns the camera pose it computes into base_link's with it.
                     'camera_mount': [round(float(v), 9) for v in compose_poses(

@@ -41,6 +41,15 @@ def register(subparsers: Any) -> None:
                         help='exploration grid spacing in metres (default 0.25)')
     parser.add_argument('--seed', type=int, default=0,
                         help='seed of odometry noise and image effects (default 0)')
+    parser.add_argument('--camera-pitch', type=float, default=0.0, metavar='DEG',
+                        help='the mount: camera pitch in degrees, positive looking up '
+                             '(written to /tf_static; default 0)')
+    parser.add_argument('--camera-roll', type=float, default=0.0, metavar='DEG',
+                        help='the mount: camera roll about its optical axis, degrees '
+                             '(default 0)')
+    parser.add_argument('--camera-height', type=float, default=None, metavar='M',
+                        help="the camera's height above the floor in metres (default: "
+                             "the scene's)")
     parser.add_argument('--width', type=int, default=None,
                         help='image width (default 1024 panoramic, 640 pinhole and fisheye)')
     parser.add_argument('--height', type=int, default=None,
@@ -94,6 +103,7 @@ def _distortion(text: str) -> tuple[str, tuple[float, ...]]:
 
 def run(args: argparse.Namespace) -> int:
     """Render the bag (or snapshot) that ``args`` describe."""
+    import dataclasses
     import math
     from pathlib import Path
 
@@ -102,23 +112,35 @@ def run(args: argparse.Namespace) -> int:
     from landmark_db.scenes import resolve_scene
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.render.effects import ImageEffects
+    from visibility_builder.synthesis.bags import BagSpec, write_bag
     from visibility_builder.synthesis.trajectory import RunParameters
 
     scene = resolve_scene(args.scene)
     effects = ImageEffects(exposure=args.exposure, blur_sigma=args.blur,
                            noise_sigma=args.noise)
+    if not (math.isfinite(args.speed) and args.speed > 0):
+        raise VisibilityBuilderError(f'--speed must be positive, got {args.speed}')
+    spec = BagSpec(kind=args.kind, camera=args.camera, width=args.width, height=args.height,
+                   hfov_deg=args.hfov, headings=args.headings, distortion=args.distortion,
+                   camera_pitch_deg=args.camera_pitch, camera_roll_deg=args.camera_roll,
+                   camera_height=args.camera_height, spacing=args.spacing,
+                   seed=args.seed, encoding=args.encoding, compression=args.compressed,
+                   jpeg_quality=args.jpeg_quality, effects=effects,
+                   run=RunParameters(max_speed=args.speed), duration=args.duration)
     if args.snapshot is not None:
         import cv2
 
-        from vbn_common.geometry.camera import make_camera
+        from vbn_common.geometry.mount import tilted
         from visibility_builder.render.lens_view import make_renderer
 
+        spec.check()
         x, y, yaw_deg = args.snapshot
         pose = np.array([x, y, math.radians(yaw_deg)])
         if not scene.free_space(pose[None, :2])[0]:
             raise VisibilityBuilderError(f'snapshot pose ({x}, {y}) is not in free space')
-        camera = make_camera(args.camera, args.width, args.height, args.hfov,
-                             args.distortion)
+        if spec.camera_height is not None:
+            scene = dataclasses.replace(scene, camera_height=spec.camera_height)
+        camera = tilted(spec.camera_model(), spec.mount_tilt())
         image = make_renderer(scene, camera).render(
             pose, encoding=args.encoding, effects=effects,
             rng=np.random.default_rng(args.seed)).image
@@ -130,16 +152,6 @@ def run(args: argparse.Namespace) -> int:
         print(f'wrote {out}: {image.shape[1]} x {image.shape[0]} {args.camera} image')
         return 0
 
-    from visibility_builder.synthesis.bags import BagSpec, write_bag
-
-    if not (math.isfinite(args.speed) and args.speed > 0):
-        raise VisibilityBuilderError(f'--speed must be positive, got {args.speed}')
-    spec = BagSpec(kind=args.kind, camera=args.camera, width=args.width, height=args.height,
-                   hfov_deg=args.hfov, headings=args.headings, distortion=args.distortion,
-                   spacing=args.spacing,
-                   seed=args.seed, encoding=args.encoding, compression=args.compressed,
-                   jpeg_quality=args.jpeg_quality, effects=effects,
-                   run=RunParameters(max_speed=args.speed), duration=args.duration)
     last = [-1]
 
     def progress(done: int, total: int) -> None:

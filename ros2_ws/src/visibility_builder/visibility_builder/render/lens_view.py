@@ -1,4 +1,4 @@
-"""Rendering through a lens: distorted pinholes and fisheyes (issue 15 item 4).
+"""Rendering through a lens or a tilted mount: distortion, fisheyes, pitch (issue 15).
 
 The column renderer (:mod:`.renderer`) needs a camera in which a vertical wall line is
 one image column: an undistorted pinhole or the cylindrical panorama. A distorted
@@ -11,6 +11,8 @@ inverse) projected into the source.
   undistorted pinhole with the same focal lengths, widened to hold every target ray
   (barrel distortion pulls a wider view into the image), so the centre keeps its
   resolution.
+- A tilted mount (:class:`~vbn_common.geometry.mount.TiltedCamera`): the same, with
+  the rays in the level camera frame (a taller panorama for a tilted panorama).
 - Fisheye (``equidistant``): the source is a cylindrical panorama with as many pixels
   per radian as the fisheye's centre (``fx``), covering elevations up to
   :data:`MAX_ELEVATION_DEG`; rays steeper than that (the floor and the ceiling right
@@ -31,6 +33,7 @@ import numpy as np
 
 from landmark_db.scene import Scene
 from vbn_common.geometry.camera import CameraModel, PanoramicCamera, PinholeCamera
+from vbn_common.geometry.mount import TiltedCamera
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects, apply_effects
 from visibility_builder.render.renderer import Renderer, Rendering
@@ -46,7 +49,8 @@ _MAX_SOURCE_SIDE = 8192
 def make_renderer(scene: Scene, camera: CameraModel,
                   atlas: WallAtlas | None = None) -> Renderer | LensRenderer:
     """Return the column renderer, or a :class:`LensRenderer` for a lens it cannot draw."""
-    if camera.kind == 'fisheye' or getattr(camera, 'distorted', False):
+    if camera.kind == 'fisheye' or getattr(camera, 'distorted', False) or \
+            isinstance(camera, TiltedCamera):
         return LensRenderer(scene, camera, atlas)
     return Renderer(scene, camera, atlas)
 
@@ -62,6 +66,11 @@ def _source_camera(camera: CameraModel, rays: np.ndarray) -> CameraModel:
             raise VisibilityBuilderError(f'fisheye too fine to render: a {width} x {height} '
                                          f'source panorama')
         return PanoramicCamera(width, height)
+    if camera.kind == 'panoramic':   # a tilted panorama: a taller level one
+        slope = np.abs(rays[:, 1]) / np.maximum(np.hypot(rays[:, 0], rays[:, 2]), 1e-9)
+        f_y = camera.width / (2.0 * math.pi)
+        half = f_y * min(float(slope.max()), math.tan(math.radians(MAX_ELEVATION_DEG)))
+        return PanoramicCamera(camera.width, int(2 * math.ceil(half) + 4))
     if camera.kind != 'pinhole':
         raise VisibilityBuilderError(f'no lens renderer for a {camera.kind} camera')
     fx, fy = float(camera.fx), float(camera.fy)  # type: ignore[attr-defined]

@@ -34,7 +34,7 @@ seeded with ``seed`` (and the frame index, for per-frame image effects).
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import logging
 import math
 from pathlib import Path
@@ -47,6 +47,7 @@ from vbn_common.bags import BagWriter, default_qos
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraModel, make_camera
 from vbn_common.geometry.frames import compose_poses, invert_pose
+from vbn_common.geometry.mount import tilt_matrix, tilted
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects
 from visibility_builder.render.lens_view import make_renderer
@@ -87,6 +88,10 @@ class BagSpec:
         headings: exploration headings per position (``None``:
             :func:`default_headings`).
         distortion: ``(model, coefficients)`` of the lens (``None``: none).
+        camera_pitch_deg: the mount's pitch, degrees (positive: looking up).
+        camera_roll_deg: the mount's roll about the optical axis, degrees.
+        camera_height: the camera's height above the floor, metres (``None``: the
+            scene's).
         spacing: exploration grid spacing, metres.
         clearance: minimum distance from an exploration pose to a wall, metres.
         seed: seeds odometry noise and image effects.
@@ -108,6 +113,9 @@ class BagSpec:
     hfov_deg: float | None = None
     headings: int | None = None
     distortion: tuple[str, tuple[float, ...]] | None = None
+    camera_pitch_deg: float = 0.0
+    camera_roll_deg: float = 0.0
+    camera_height: float | None = None
     spacing: float = 0.25
     clearance: float = 0.2
     seed: int = 0
@@ -140,10 +148,24 @@ class BagSpec:
             raise VisibilityBuilderError(f'headings must be 1..72, got {self.headings}')
         if self.headings is not None and self.kind != 'exploration':
             raise VisibilityBuilderError('headings are for explorations only')
+        for name in ('camera_pitch_deg', 'camera_roll_deg'):
+            if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 45):
+                raise VisibilityBuilderError(f'{name.replace("_deg", "")} must be within 45 '
+                                             f'degrees, got {getattr(self, name)}')
+        if self.camera_height is not None and not (math.isfinite(self.camera_height)
+                                                   and self.camera_height > 0):
+            raise VisibilityBuilderError(f'camera height must be positive, got '
+                                         f'{self.camera_height}')
         try:
             self.camera_model()
         except VbnCommonError as error:
             raise VisibilityBuilderError(str(error)) from None
+
+    def mount_tilt(self) -> np.ndarray | None:
+        """Return the mount's tilt (:func:`~vbn_common.geometry.mount.tilt_matrix`), or None."""
+        if self.camera_pitch_deg == 0 and self.camera_roll_deg == 0:
+            return None
+        return tilt_matrix(self.camera_pitch_deg, self.camera_roll_deg)
 
     def camera_model(self) -> CameraModel:
         """Return the camera the bag is rendered through."""
@@ -244,7 +266,9 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     out = Path(out)
     if out.exists():
         raise VisibilityBuilderError(f'{out} exists already, not overwriting')
-    camera = spec.camera_model()
+    camera = tilted(spec.camera_model(), spec.mount_tilt())
+    if spec.camera_height is not None:
+        scene = replace(scene, camera_height=float(spec.camera_height))
     # Plan before opening the bag: bad input must leave nothing behind.
     if spec.kind == 'exploration':
         frames = list(_camera_frames(spec, scene))
@@ -259,7 +283,8 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     with BagWriter(out) as writer:
         bag = _Bag(writer, spec.compression is not None, trajectory is not None)
         bag.write(names.TF_STATIC, START_NS, messages.tf_message(
-            [messages.camera_static_transform(START_NS, scene.camera_height)]))
+            [messages.camera_static_transform(START_NS, scene.camera_height,
+                                              spec.mount_tilt())]))
 
         def write_image(index: int, stamp: int, pose: np.ndarray) -> None:
             rng = np.random.default_rng([spec.seed, index])

@@ -11,10 +11,15 @@ from typing import Any
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from vbn_common.bags import TYPESTORE
 from vbn_common.geometry.camera import CameraInfoFields
-from vbn_common.geometry.frames import BASE_TO_CAMERA_QUATERNION, yaw_quaternion
+from vbn_common.geometry.frames import (
+    BASE_TO_CAMERA_QUATERNION,
+    BASE_TO_CAMERA_ROTATION,
+    yaw_quaternion,
+)
 from vbn_common.names import BASE_FRAME, CAMERA_FRAME, MAP_FRAME, ODOM_FRAME
 from visibility_builder.errors import VisibilityBuilderError
 
@@ -128,10 +133,19 @@ def planar_transform(stamp_ns: int, parent: str, child: str, pose: np.ndarray) -
     return transform(stamp_ns, parent, child, (x, y, 0.0), yaw_quaternion(yaw))
 
 
-def camera_static_transform(stamp_ns: int, camera_height: float) -> Any:
-    """Return ``base_link -> camera``: up ``camera_height``, rotated to the optical frame."""
+def camera_static_transform(stamp_ns: int, camera_height: float,
+                            tilt: np.ndarray | None = None) -> Any:
+    """Return ``base_link -> camera``: up ``camera_height``, rotated to the optical frame.
+
+    ``tilt`` (:mod:`vbn_common.geometry.mount`) pitches and rolls the optical frame.
+    """
+    if tilt is None:
+        return transform(stamp_ns, BASE_FRAME, CAMERA_FRAME, (0.0, 0.0, camera_height),
+                         BASE_TO_CAMERA_QUATERNION)
+    rotation = BASE_TO_CAMERA_ROTATION @ np.asarray(tilt, float).reshape(3, 3)
+    quaternion = tuple(float(v) for v in Rotation.from_matrix(rotation).as_quat())
     return transform(stamp_ns, BASE_FRAME, CAMERA_FRAME, (0.0, 0.0, camera_height),
-                     BASE_TO_CAMERA_QUATERNION)
+                     quaternion)
 
 
 def tf_message(transforms: list[Any]) -> Any:
