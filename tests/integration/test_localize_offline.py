@@ -100,6 +100,22 @@ def test_a_run_of_another_camera_is_an_error_naming_both(room_db: Path, tmp_path
     assert not (tmp_path / 'poses').exists()
 
 
+def test_a_run_camera_at_another_resolution_is_read_with_its_own_camera_info(
+        room_db: Path, tmp_path) -> None:
+    # Issue 15: a 2048 x 512 panorama against the database of 1024 x 256 ones.
+    run = tmp_path / 'fine_run'
+    made = vbn('render', '--scene', 'room', '--kind', 'run', '--width', '2048', '--height',
+               '512', '--duration', '6', '--compressed', '--out', str(run))
+    assert made.returncode == 0, made.stderr
+    figures = tmp_path / 'figures.json'
+    proc = vbn('localize', '--db', str(room_db), str(run), '--out', str(tmp_path / 'poses'),
+               '--json', str(figures), '--quiet', '--no-evo')
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    result = json.loads(figures.read_text())
+    assert result['frames'] == 61 and result['availability'] >= 0.9, result
+    assert result['accuracy']['translation_median_m'] <= 0.02, result
+
+
 def test_a_run_of_another_place_warns_that_nothing_was_recognised(room_db: Path,
                                                                   tmp_path) -> None:
     run = tmp_path / 'floor_run'

@@ -297,12 +297,15 @@ def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) 
     send(pub.image, pub.raw(stamp(), data=gray.tobytes()), 0.5)
     assert ros_node.spin_until(lambda: len(listener.regions) == count + 1, timeout=10)
 
-    # A CameraInfo that does not match (then changes back): frames dropped meanwhile.
+    # A CameraInfo at another size: taken as the frames' own camera, so frames of
+    # another size than it says are dropped, one warning.
     send(pub.info, pub.camera_info(512, 128))
-    node.wait_for_output('CameraInfo 512x128 panoramic .* does not match the database '
-                         'camera 1024x256', timeout=20)
+    node.wait_for_output('CameraInfo 512x128 panoramic differs from the database camera '
+                         '1024x256: frames are read with their own calibration', timeout=20)
     count = len(listener.regions)
     good_frames(3, 11)
+    node.wait_for_output('frame dropped: image is 1024x256, its CameraInfo 512x128',
+                         timeout=20)
     assert len(listener.regions) == count
     garbage = pub.camera_info()
     garbage.k = [float('nan')] * 9
@@ -312,7 +315,7 @@ def test_bad_input_is_warned_once_and_dropped(room_db, start_process, ros_node) 
                          r'must hold 9 finite numbers', timeout=20)
     assert node.output.count('CameraInfo cannot be used') == 1
     send(pub.info, pub.camera_info())
-    node.wait_for_output('CameraInfo matches the database camera again', timeout=20)
+    node.wait_for_output('CameraInfo fits the database camera again', timeout=20)
     good_frames(3, 14)
     assert len(listener.regions) > count
 

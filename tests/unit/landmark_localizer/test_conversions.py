@@ -103,24 +103,35 @@ def camera_info(camera) -> CameraInfo:
 
 
 def test_camera_mismatch() -> None:
+    from landmark_localizer.camera_check import frame_camera
+
     panorama = PanoramicCamera(1024, 256)
     assert camera_mismatch(camera_info(panorama), panorama) == ''
-    text = camera_mismatch(camera_info(PanoramicCamera(512, 128)), panorama)
-    assert text.startswith('CameraInfo 512x128 panoramic') and '1024x256 panoramic' in text
+    assert frame_camera(camera_info(panorama), panorama) == (panorama, '')
+    # Another resolution or calibration of the same kind: the frames' own camera.
+    assert frame_camera(camera_info(PanoramicCamera(512, 128)), panorama) == (
+        PanoramicCamera(512, 128), '')
+    shifted = PanoramicCamera(1024, 256, y0=100.0)
+    assert frame_camera(camera_info(shifted), panorama) == (shifted, '')
+    # Another kind of camera: refused, naming both.
     pinhole = PinholeCamera.from_fov(1024, 256, 90.0)
-    assert 'pinhole' in camera_mismatch(camera_info(pinhole), panorama)
-    shifted = camera_info(PanoramicCamera(1024, 256, y0=100.0))
-    assert 'cy 100' in camera_mismatch(shifted, panorama)
+    assert camera_mismatch(camera_info(pinhole), panorama) == (
+        'CameraInfo 1024x256 pinhole (fx 512, fy 512, cx 511.5, cy 127.5) is not the kind '
+        'of the database camera 1024x256 panoramic (fx 162.975, fy 162.975, cx 512, cy 128)')
     # A lens the database was not built with: named with its coefficients.
     distorted = camera_info(pinhole)
     distorted.d = [0.1, 0.0, 0.0, 0.0, 0.0]
     assert camera_mismatch(distorted, pinhole) == (
         'CameraInfo 1024x256 pinhole (fx 512, fy 512, cx 511.5, cy 127.5, plumb_bob '
-        'd=[0.1, 0, 0, 0, 0]) does not match the database camera 1024x256 pinhole (fx 512, '
-        'fy 512, cx 511.5, cy 127.5)')
+        'd=[0.1, 0, 0, 0, 0]) has plumb_bob distortion, the database camera 1024x256 '
+        'pinhole (fx 512, fy 512, cx 511.5, cy 127.5) none')
     lens = PinholeCamera(1024, 256, pinhole.fx, pinhole.fy, pinhole.cx, pinhole.cy,
                          distortion_model='plumb_bob', d=(0.1, 0.0, 0.0, 0.0, 0.0))
     assert camera_mismatch(distorted, lens) == ''
+    # Another calibration of the same lens model: the run's coefficients are used.
+    distorted.d = [0.12, 0.0, 0.0, 0.0, 0.0]
+    camera, problem = frame_camera(distorted, lens)
+    assert problem == '' and camera.d == (0.12, 0.0, 0.0, 0.0, 0.0)
     distorted.d = [0.1, 0.0, 0.0, 0.0]   # four coefficients for plumb_bob
     assert camera_mismatch(distorted, lens).startswith(
         'CameraInfo cannot be used (plumb_bob distortion takes 5 coefficients, got 4)')

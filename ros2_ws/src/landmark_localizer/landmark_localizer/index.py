@@ -121,6 +121,9 @@ class DatabaseIndex:
                 database.info.parameters.get('camera_tilt'))
         except VbnCommonError as error:
             raise LocalizerError(f'database camera: {error}') from None
+        # The camera of the frames being localized: the database's, or the run's own
+        # (another resolution or calibration; camera_check.frame_camera).
+        self.frame_camera: CameraModel = self.camera
         mount = database.info.parameters.get('camera_mount', [0.0, 0.0, 0.0])
         self.camera_mount = np.asarray(mount, float).reshape(3)
         classes = database.classes
@@ -314,7 +317,10 @@ class DatabaseIndex:
 
     def project(self, camera_pose: np.ndarray, class_ids: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted pixels of classes from a camera pose: ``(uv (n, 2), valid (n,))``."""
+        """Predicted pixels of classes from a camera pose: ``(uv (n, 2), valid (n,))``.
+
+        Pixels of :attr:`frame_camera`, the camera of the frames being localized.
+        """
         pts = self.points[class_ids]
         ok = np.all(np.isfinite(pts), axis=1)
         x, y, yaw = (float(v) for v in camera_pose)
@@ -324,7 +330,7 @@ class DatabaseIndex:
         optical = base @ BASE_TO_CAMERA_ROTATION  # p_optical = M^T p_base
         uv = np.full((len(class_ids), 2), np.nan)
         if ok.any():
-            proj, valid = self.camera.project(optical[ok])
+            proj, valid = self.frame_camera.project(optical[ok])
             uv[ok] = proj
             ok[ok] = valid
         return uv, ok

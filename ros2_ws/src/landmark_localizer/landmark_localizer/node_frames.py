@@ -16,7 +16,7 @@ import numpy as np
 from std_msgs.msg import Int32
 
 from landmark_localizer import conversions
-from landmark_localizer.camera_check import camera_mismatch
+from landmark_localizer.camera_check import frame_camera
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import Frame
 from landmark_localizer.node_support import reason_kind
@@ -84,21 +84,28 @@ class FrameHandling:
                 return
             changed = self.camera_key is not None
             self.camera_key = key
-            problem = camera_mismatch(msg, loaded.index.camera)
+            camera, problem = frame_camera(msg, loaded.index.camera)
             was = self.camera_problem
             self.camera_problem = problem
+            if camera is not None:   # the frames' own camera (another resolution, say)
+                loaded.index.frame_camera = camera
+        if camera is not None and camera is not loaded.index.camera:
+            base = loaded.index.camera
+            self.log.info(f'CameraInfo {camera.width}x{camera.height} {camera.kind} differs '
+                          f'from the database camera {base.width}x{base.height}: frames are '
+                          'read with their own calibration')
         if problem:
             prefix = 'CameraInfo changed: ' if changed else ''
             self.warnings.warn('camera:' + reason_kind(problem),
                                f'{prefix}{problem}: frames are dropped until it matches')
         elif was:
-            self.log.info('CameraInfo matches the database camera again: frames resume')
+            self.log.info('CameraInfo fits the database camera again: frames resume')
 
     def _process_frame(self, msg: Any, start: float) -> None:
         loaded = self.loaded
         if loaded is None:
             return
-        camera = loaded.index.camera
+        camera = loaded.index.frame_camera
         stamp = conversions.stamp_to_ns(msg.header.stamp)
         if self.last_stamp is not None and stamp <= self.last_stamp:
             back = self.last_stamp - stamp
@@ -133,8 +140,10 @@ class FrameHandling:
             return
         shape = (camera.height, camera.width)
         if image.shape != shape:
-            self._drop('size', f'image is {image.shape[1]}x{image.shape[0]}, the '
-                       f'database camera {shape[1]}x{shape[0]}')
+            whose = 'the database camera' if camera is loaded.index.camera else \
+                'its CameraInfo'
+            self._drop('size', f'image is {image.shape[1]}x{image.shape[0]}, {whose} '
+                       f'{shape[1]}x{shape[0]}')
             return
         odom = self._odometry_at(stamp)
         self.last_stamp = stamp

@@ -48,7 +48,9 @@ class PoseSolution:
 
 
 def _focal(index: DatabaseIndex) -> float:
-    return float(index.database.info.camera.K[0, 0])
+    """Pixels per radian at the centre of the frames' camera (its thresholds' unit)."""
+    camera = index.frame_camera
+    return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)  # type: ignore
 
 
 def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
@@ -87,7 +89,8 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         try:
             motion: RelativeMotion = relative_motion(
                 view.keypoints[rows[have]], uv[have], index.camera,
-                method=config.method or None, config=two_view, rng=rng)
+                method=config.method or None, config=two_view, rng=rng,
+                current_camera=index.frame_camera)
         except VbnCommonError:
             continue
         n_in = int(motion.inliers.sum())
@@ -176,7 +179,7 @@ class _Correspondences:
 
 def _correspondences(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
                      uv: np.ndarray, min_points: int) -> _Correspondences | None:
-    rays_current = index.camera.unproject(uv)
+    rays_current = index.frame_camera.unproject(uv)
     poses, view, classes, model, current = [], [], [], [], []
     for v in region.views:
         rows = np.array([v.position.get(int(c), -1) for c in class_ids])

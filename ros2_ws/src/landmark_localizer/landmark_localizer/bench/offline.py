@@ -22,7 +22,7 @@ from landmark_localizer.bench.evaluation import (
     latency_summary,
 )
 from landmark_localizer.bench.pose_bags import PoseRecord, RunBag
-from landmark_localizer.camera_check import camera_mismatch
+from landmark_localizer.camera_check import frame_camera
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.localizer import LOST, Estimate, Frame, Localizer
@@ -207,20 +207,21 @@ def coverage_split(result: OfflineRun, run: RunBag, index: DatabaseIndex
     return split
 
 
-def check_run_camera(run: RunBag, camera: CameraModel, db: str) -> None:
-    """Refuse a run whose camera is not the database's, naming both.
+def check_run_camera(run: RunBag, camera: CameraModel, db: str) -> CameraModel:
+    """Return the run's camera, or refuse a run whose camera the database cannot take.
 
-    The run's first ``CameraInfo`` is compared (model, size, ``K``); a run without one is
-    judged by its first image's size.
+    The run's first ``CameraInfo`` gives it (:func:`~landmark_localizer.camera_check.
+    frame_camera`: the same kind and distortion model as the database's, at any size
+    and calibration); a run without one must have the database camera's image size.
 
     Raises:
         LocalizerError: the cameras differ, or the first image cannot be decoded.
     """
     if run.camera_info is not None:
-        problem = camera_mismatch(run.camera_info, camera)
-        if problem:
+        run_camera, problem = frame_camera(run.camera_info, camera)
+        if run_camera is None:
             raise LocalizerError(f'{run.path} does not fit {db}: {problem}')
-        return
+        return run_camera
     try:
         image = decode_image(deserialize(run.images[0], run.image_type))
     except VbnCommonError as error:
@@ -231,6 +232,7 @@ def check_run_camera(run: RunBag, camera: CameraModel, db: str) -> None:
             f'{run.path} does not fit {db}: its images are {image.shape[1]}x{image.shape[0]} '
             f'(no CameraInfo), the database camera {camera.width}x{camera.height} '
             f'{camera.kind}')
+    return camera
 
 
 def never_recognised(result: OfflineRun) -> bool:

@@ -137,7 +137,8 @@ def run(args: argparse.Namespace) -> int:
         size_bytes = Path(args.db).stat().st_size
     run_bag = read_run_bag(args.bag, limit=args.limit, image_topic=args.image_topic)
     if not args.baseline:
-        check_run_camera(run_bag, localizer.index.camera, args.db)
+        localizer.index.frame_camera = check_run_camera(run_bag, localizer.index.camera,
+                                                        args.db)
     pinned = use_one_core() if args.one_core else ''  # after the baseline's SIFT pool
     result = localize_run(localizer, run_bag, progress=_progress(args.quiet))
     n_poses = write_pose_bag(out, result.records(), run_bag.truth_messages,

@@ -81,7 +81,8 @@ def _focal(camera: CameraModel) -> float:
 
 def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: CameraModel, *,
                     method: str | None = None, config: TwoViewConfig | None = None,
-                    rng: np.random.Generator | int | None = None) -> RelativeMotion:
+                    rng: np.random.Generator | int | None = None,
+                    current_camera: CameraModel | None = None) -> RelativeMotion:
     """Estimate the motion from a model view to the current view from matched pixels.
 
     Converts pixels to rays with ``camera`` (the same model for both views) and
@@ -93,7 +94,10 @@ def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: Camera
     Args:
         uv_model: ``(n, 2)`` pixel coordinates in the model view.
         uv_current: ``(n, 2)`` pixel coordinates of the same points in the current view.
-        camera: the camera model of both views.
+        camera: the camera model of both views (of the model view when
+            ``current_camera`` is given).
+        current_camera: the current view's camera when it is another (a run camera at
+            another resolution); of the same kind.
         method: ``None`` (by camera kind), or a name from :data:`METHODS`.
         config: thresholds and RANSAC settings (default :class:`TwoViewConfig`).
         rng: random generator or seed.
@@ -112,7 +116,8 @@ def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: Camera
                              f'{", ".join(METHODS)})')
     uv_model = np.asarray(uv_model, dtype=float).reshape(-1, 2)
     uv_current = np.asarray(uv_current, dtype=float).reshape(-1, 2)
-    rays_model, rays_current = camera.unproject(uv_model), camera.unproject(uv_current)
+    rays_model = camera.unproject(uv_model)
+    rays_current = (current_camera or camera).unproject(uv_current)
     f = _focal(camera)
     common = {'threshold': config.threshold_px / f, 'noise_floor': config.noise_floor_px / f,
               'min_parallax': config.min_parallax_px / f,
