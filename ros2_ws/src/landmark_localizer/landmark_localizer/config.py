@@ -61,6 +61,11 @@ class LocalizerConfig:
         max_position_std_m: poses with a larger position standard deviation are not
             published.
         hint_radius_m: /initialpose restricts voting to regions with a pose this close.
+        tilt_prior_deg: the frame's own pitch and roll (vibration, an uneven floor) and
+            its height offset are refined with the pose, with this prior standard
+            deviation (:mod:`.tilt_refinement`), and kept when they cut the epipolar
+            cost to under a third; 0 refines the planar pose only.
+        height_prior_m: prior standard deviation of the frame's height offset, metres.
         seed: random generator seed of the robust solvers.
     """
 
@@ -91,6 +96,8 @@ class LocalizerConfig:
     max_heading_disagreement_deg: float = 3.0
     max_position_std_m: float = 0.5
     hint_radius_m: float = 1.5
+    tilt_prior_deg: float = 1.0
+    height_prior_m: float = 0.1
     seed: int = 0
 
     def __post_init__(self) -> None:

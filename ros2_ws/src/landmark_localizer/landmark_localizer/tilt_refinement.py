@@ -1,0 +1,143 @@
+"""The pose refinement with the frame's own pitch, roll and height (issue 15 item 2).
+
+:func:`~landmark_localizer.pose.refine_pose` solves the planar pose ``(x, y, yaw)`` on
+the epipolar errors of all model views (thesis 7.4 and 7.5: planar motion, a level
+camera at the exploration's height). A real robot departs from that per frame:
+vibration and an uneven floor pitch and roll the camera by fractions of a degree that
+the mount does not explain, and a second robot sharing the database carries its
+camera at another height. Both break the planar constraint, and the planar pose
+absorbs the error.
+
+Here the current camera's state is ``(x, y, yaw, pitch, roll, dz)``: its rays are
+levelled by the frame's tilt (:func:`~vbn_common.geometry.mount.tilt_matrix`) and it
+stands ``dz`` above the model views' height. The model views stay as the exploration
+recorded them (level, after the mount's tilt, at one height), so their planar poses
+fix each baseline's horizontal part and its length; ``dz`` is its vertical part. For
+correspondence ``i`` of view ``v`` with world directions ``a1`` (model) and ``a2``
+(current) and the baseline's direction ``b`` (from the model view to the current
+camera), the coplanarity error is ``e = b . (a1 x a2)`` and its Sampson angular error
+on the sphere ``e / sqrt(2 - (b . a1)^2 - (b . a2)^2)``, the same measure as the planar
+solvers' (:func:`vbn_common.geometry.epipolar.planar_sampson`).
+
+Priors keep the three extra unknowns where the data cannot place them (a robot on the
+line through two views, few points): ``pitch, roll ~ N(0, tilt_prior_deg)`` and ``dz ~
+N(0, height_prior_m)``, as residual rows scaled to the measurement noise.
+Gauss-Newton with Huber weights, the Jacobian by forward differences in one vectorised
+pass; the covariance of ``(x, y, yaw)`` is the marginal of the full one.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, wrap_angle
+
+__all__ = ['marginal_covariance', 'refine_tilted', 'tilted_residuals']
+
+_M = BASE_TO_CAMERA_ROTATION  # planar (z up) <- optical
+_STEP = np.array([1e-4, 1e-4, 1e-5, 1e-5, 1e-5, 1e-4])
+
+
+def _levelling(pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
+    """``(m, 3, 3)`` rotations taking the frame's rays to level ones, in the planar frame.
+
+    ``M R_x(pitch) R_z(roll) M^T``: the tilt of :mod:`vbn_common.geometry.mount`, which
+    is defined in the optical frame.
+    """
+    cp, sp, cr, sr = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    zero, one = np.zeros_like(cp), np.ones_like(cp)
+    rx = np.stack([np.stack([one, zero, zero], -1), np.stack([zero, cp, -sp], -1),
+                   np.stack([zero, sp, cp], -1)], -2)
+    rz = np.stack([np.stack([cr, -sr, zero], -1), np.stack([sr, cr, zero], -1),
+                   np.stack([zero, zero, one], -1)], -2)
+    return _M @ (rx @ rz) @ _M.T
+
+
+def tilted_residuals(states: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
+                     rays_model: np.ndarray, rays_current: np.ndarray) -> np.ndarray:
+    """Return the ``(m, n)`` Sampson angular errors of ``m`` states (module docstring).
+
+    Args:
+        states: ``(m, 6)`` ``(x, y, yaw, pitch, roll, dz)`` of the current camera.
+        view_poses: ``(V, 3)`` planar camera poses of the model views.
+        view: ``(n,)`` the view of each correspondence.
+        rays_model: ``(n, 3)`` optical rays in the model views (already levelled by the
+            mount).
+        rays_current: ``(n, 3)`` optical rays of the current frame (idem).
+    """
+    states = np.atleast_2d(states)
+    vp = view_poses[view]                                        # (n, 3)
+    g1 = rays_model @ _M.T                                       # planar frame, (n, 3)
+    c1, s1 = np.cos(vp[:, 2]), np.sin(vp[:, 2])
+    a1 = np.stack([c1 * g1[:, 0] - s1 * g1[:, 1], s1 * g1[:, 0] + c1 * g1[:, 1],
+                   g1[:, 2]], axis=1)                            # world directions
+    level = _levelling(states[:, 3], states[:, 4])               # (m, 3, 3)
+    g2 = np.einsum('mij,nj->mni', level, rays_current @ _M.T)    # (m, n, 3)
+    c2, s2 = np.cos(states[:, 2])[:, None], np.sin(states[:, 2])[:, None]
+    a2 = np.stack([c2 * g2[..., 0] - s2 * g2[..., 1], s2 * g2[..., 0] + c2 * g2[..., 1],
+                   g2[..., 2]], axis=-1)
+    b = np.stack([states[:, None, 0] - vp[None, :, 0], states[:, None, 1] - vp[None, :, 1],
+                  np.broadcast_to(states[:, None, 5], (len(states), len(vp)))], axis=-1)
+    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
+    e = np.einsum('mnk,mnk->mn', b, np.cross(a1[None], a2))
+    d1 = np.einsum('mnk,nk->mn', b, a1)
+    d2 = np.einsum('mnk,mnk->mn', b, a2)
+    return e / np.sqrt(np.maximum(2.0 - d1 * d1 - d2 * d2, 1e-12))
+
+
+def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
+                  rays_model: np.ndarray, rays_current: np.ndarray, threshold: float,
+                  noise: float, tilt_prior_deg: float, height_prior_m: float,
+                  iterations: int = 10
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Refine ``(x, y, yaw, pitch, roll, dz)`` from the planar pose ``initial``.
+
+    Args:
+        initial: ``(3,)`` planar camera pose to start from (pitch, roll, dz start at 0).
+        view_poses: ``(V, 3)`` the model views' planar camera poses.
+        view: ``(n,)`` the view of each correspondence.
+        rays_model: ``(n, 3)`` its rays in the model view.
+        rays_current: ``(n, 3)`` its rays in the current frame.
+        threshold: Huber threshold, radians.
+        noise: the measurement noise that scales the prior rows, radians.
+        tilt_prior_deg: standard deviation of the frame's pitch and roll, degrees.
+        height_prior_m: standard deviation of its height offset, metres.
+        iterations: Gauss-Newton steps at most.
+
+    Returns:
+        ``(state (6,), residuals (n,), jacobian (n, 6))`` at the solution, or None if a
+        step cannot be solved.
+    """
+    state = np.r_[np.asarray(initial, float)[:3], 0.0, 0.0, 0.0]
+    prior = np.array([0, 0, 0, 1.0 / math.radians(tilt_prior_deg),
+                      1.0 / math.radians(tilt_prior_deg), 1.0 / height_prior_m]) * noise
+    args = (view_poses, view, rays_model, rays_current)
+    for _ in range(iterations):
+        both = tilted_residuals(np.vstack([state, state + np.diag(_STEP)]), *args)
+        r, jac = both[0], ((both[1:] - both[0]) / _STEP[:, None]).T
+        weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
+        jw = jac * weights[:, None]
+        normal = jw.T @ jac + np.diag(prior ** 2) + 1e-12 * np.eye(6)
+        try:
+            delta = np.linalg.solve(normal, -(jw.T @ r + prior ** 2 * state))
+        except np.linalg.LinAlgError:
+            return None
+        state = state + delta
+        state[2] = float(wrap_angle(state[2]))
+        if np.abs(delta[[0, 1, 5]]).max() < 1e-4 and np.abs(delta[2:5]).max() < 1e-5:
+            break
+    both = tilted_residuals(np.vstack([state, state + np.diag(_STEP)]), *args)
+    return state, both[0], ((both[1:] - both[0]) / _STEP[:, None]).T
+
+
+def marginal_covariance(jac: np.ndarray, sigma2: float, noise: float,
+                        tilt_prior_deg: float, height_prior_m: float) -> np.ndarray | None:
+    """Return the ``(3, 3)`` covariance of ``(x, y, yaw)``, the tilt and height marginalised."""
+    prior = np.array([0, 0, 0, 1.0 / math.radians(tilt_prior_deg),
+                      1.0 / math.radians(tilt_prior_deg), 1.0 / height_prior_m]) * noise
+    try:
+        full = np.linalg.inv(jac.T @ jac + np.diag(prior ** 2 * sigma2 / noise ** 2))
+    except np.linalg.LinAlgError:
+        return None
+    return sigma2 * full[:3, :3]
