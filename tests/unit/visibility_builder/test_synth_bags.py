@@ -232,3 +232,25 @@ def test_a_tilted_mount_is_written_to_tf_static_and_read_back(tmp_path, room):
                                                              abs=1e-9)
     with pytest.raises(VisibilityBuilderError, match='pitch must be within 45'):
         BagSpec(camera_pitch_deg=60.0).check()
+
+
+def test_vibration_tilts_each_frame_and_the_ground_truth_says_by_how_much(tmp_path, room):
+    from vbn_common.exploration import read_exploration
+    from vbn_common.geometry.mount import tilt_angles
+
+    spec = BagSpec(kind='exploration', camera='panoramic', width=128, height=32, spacing=1.5,
+                   vibration_deg=0.5, compression='jpeg', encoding='mono8')
+    write_bag(room, spec, tmp_path / 'shaky')
+    exploration = read_exploration(tmp_path / 'shaky')
+    assert exploration.camera_tilt is None          # the mount itself is level
+    angles = np.array([tilt_angles(f.camera_tilt) for f in exploration.frames])
+    # Each frame's own pitch and roll, drawn as the renderer drew them (seed, frame, 7).
+    drawn = np.array([np.clip(np.random.default_rng([0, i, 7]).normal(0.0, 0.5, 2), -2, 2)
+                      for i in range(len(exploration.frames))])
+    np.testing.assert_allclose(angles, drawn, atol=1e-6)
+    assert 0.2 < angles.std() < 0.8
+    # The planar pose is untouched: the heading is the base's yaw.
+    assert exploration.camera_poses()[:, 2] == pytest.approx(
+        exploration.base_poses()[:, 2], abs=0.05)
+    with pytest.raises(VisibilityBuilderError, match='vibration must be 0 to 5 degrees'):
+        BagSpec(vibration_deg=-1.0).check()

@@ -60,7 +60,7 @@ import numpy as np
 from vbn_common.bags import open_bag
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraModel, camera_from_info
-from vbn_common.geometry.mount import level_tilt, tilt_angles, tilted
+from vbn_common.geometry.mount import level_frame, level_tilt, tilt_angles, tilted
 from vbn_common.images import EncodedImage, ImageDecodeError, check_image
 from vbn_common.names import (
     BASE_FRAME,
@@ -198,6 +198,9 @@ class Frame:
         camera_pose: ``(x, y, heading)`` of the camera in ``map``: the camera frame's
             origin on the floor and the azimuth of its forward (optical ``z``) axis.
         topic: the topic the image came from.
+        camera_tilt: ``(3, 3)`` the camera's pitch and roll at this frame
+            (:mod:`vbn_common.geometry.mount`) when the pose source tilts the base (a
+            shaking robot, an uneven floor) beyond the mount's; ``None`` otherwise.
     """
 
     stamp_ns: int
@@ -205,6 +208,7 @@ class Frame:
     base_pose: tuple[float, float, float]
     camera_pose: tuple[float, float, float]
     topic: str
+    camera_tilt: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -511,9 +515,12 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
             f'no usable images in bag {path}: none of the {total} on {image_topic} has a '
             f'valid pose from {pose_topic} (skipped: '
             f'{", ".join(f"{k} {v}" for k, v in skipped.items() if v)})')
+    frame_tilts = _frame_tilts(camera_r, valid, camera_tilt) if axis == 2 else \
+        [None] * len(stamps)
     frames = tuple(
         Frame(stamp_ns=int(stamps[i]), image=images[i][1], base_pose=_planar(base_pose[i]),
-              camera_pose=_planar(camera_pose[i]), topic=image_topic)
+              camera_pose=_planar(camera_pose[i]), topic=image_topic,
+              camera_tilt=frame_tilts[i])
         for i in np.flatnonzero(valid))
     _LOG.info('read %d frames from %s (%s poses); skipped %s', len(frames), path, source,
               skipped)
@@ -522,6 +529,25 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         topics={'image': image_topic, 'camera_info': config.camera_info_topic,
                 'pose': pose_topic},
         skipped=skipped, warnings=tuple(warn.messages), path=path, camera_tilt=camera_tilt)
+
+
+def _frame_tilts(camera_r: np.ndarray, valid: np.ndarray, mount: np.ndarray | None
+                 ) -> list[np.ndarray | None]:
+    """Return each frame's camera tilt in ``map`` where it differs from the mount's.
+
+    ``None`` where it does not (by less than 0.001 degrees) or the frame is invalid.
+    """
+    mount = np.eye(3) if mount is None else mount
+    tilts: list[np.ndarray | None] = [None] * len(camera_r)
+    for i in np.flatnonzero(valid):
+        try:
+            tilt = level_frame(camera_r[i][:, 2]).T @ camera_r[i]
+        except VbnCommonError:
+            continue
+        cosine = (np.trace(mount.T @ tilt) - 1.0) / 2.0
+        if np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) > 1e-3:
+            tilts[i] = tilt
+    return tilts
 
 
 def _mount_tilt(rotations: np.ndarray, found: np.ndarray, camera_frame: str,

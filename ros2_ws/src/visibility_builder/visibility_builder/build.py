@@ -290,6 +290,30 @@ class _Stages:
         self.report.counts[self.name] = counts
 
 
+def _level_keypoints(frames: Sequence[Any], features: list[ImageFeatures],
+                     exploration: Exploration) -> int:
+    """Move the keypoints of frames tilted beyond the mount to where the mount puts them.
+
+    A frame whose pose source tilts it (a shaking robot: the ground truth carries the
+    pitch and roll) sees the scene a fraction of a degree off; its keypoints are
+    re-projected, ray by ray, into the camera as mounted, so that the classes, their
+    geometric check and the model views all see one camera. Descriptors are kept (the
+    patch barely changes). Returns how many frames were moved.
+    """
+    mounted = exploration.camera_model()
+    lens = getattr(mounted, 'camera', mounted)
+    moved = 0
+    for i, frame in enumerate(frames):
+        tilt = getattr(frame, 'camera_tilt', None)
+        if tilt is None or len(features[i]) == 0:
+            continue
+        rays = lens.unproject(features[i].keypoints.astype(float)) @ np.asarray(tilt).T
+        uv, _ = mounted.project(rays)
+        features[i] = replace(features[i], keypoints=uv.astype(np.float32))
+        moved += 1
+    return moved
+
+
 def _camera_intrinsics(exploration: Exploration) -> CameraIntrinsics:
     info = exploration.camera_info
     kind = camera_from_info(info).kind
@@ -371,9 +395,11 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
             features.append(ImageFeatures.empty())
         else:
             features.append(result)
+    levelled = _level_keypoints(frames, features, exploration)
     n_feats = np.array([len(f) for f in features])
     stages.end(images=len(frames), undecodable=undecodable, features=int(n_feats.sum()),
-               per_image_mean=float(n_feats.mean()), per_image_median=float(np.median(n_feats)))
+               per_image_mean=float(n_feats.mean()), per_image_median=float(np.median(n_feats)),
+               **({'levelled_images': levelled} if levelled else {}))
 
     stages.begin('classes')
     pose_descriptors = [

@@ -50,6 +50,9 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--camera-height', type=float, default=None, metavar='M',
                         help="the camera's height above the floor in metres (default: "
                              "the scene's)")
+    parser.add_argument('--vibration', type=float, default=0.0, metavar='DEG',
+                        help='per-frame random pitch and roll of that standard deviation, '
+                             'degrees (the ground truth pose carries them; default 0)')
     parser.add_argument('--width', type=int, default=None,
                         help='image width (default 1024 panoramic, 640 pinhole and fisheye)')
     parser.add_argument('--height', type=int, default=None,
@@ -123,7 +126,8 @@ def run(args: argparse.Namespace) -> int:
     spec = BagSpec(kind=args.kind, camera=args.camera, width=args.width, height=args.height,
                    hfov_deg=args.hfov, headings=args.headings, distortion=args.distortion,
                    camera_pitch_deg=args.camera_pitch, camera_roll_deg=args.camera_roll,
-                   camera_height=args.camera_height, spacing=args.spacing,
+                   camera_height=args.camera_height, vibration_deg=args.vibration,
+                   spacing=args.spacing,
                    seed=args.seed, encoding=args.encoding, compression=args.compressed,
                    jpeg_quality=args.jpeg_quality, effects=effects,
                    run=RunParameters(max_speed=args.speed), duration=args.duration)

@@ -46,17 +46,23 @@ MAX_ELEVATION_DEG = 72.0
 _MAX_SOURCE_SIDE = 8192
 
 
-def make_renderer(scene: Scene, camera: CameraModel,
-                  atlas: WallAtlas | None = None) -> Renderer | LensRenderer:
-    """Return the column renderer, or a :class:`LensRenderer` for a lens it cannot draw."""
+def make_renderer(scene: Scene, camera: CameraModel, atlas: WallAtlas | None = None,
+                  margin_deg: float = 0.0) -> Renderer | LensRenderer:
+    """Return the column renderer, or a :class:`LensRenderer` for a lens it cannot draw.
+
+    ``margin_deg`` > 0: a lens renderer whose frames may tilt by up to that much more
+    (:meth:`LensRenderer.render`'s ``tilt``; vibration).
+    """
     if camera.kind == 'fisheye' or getattr(camera, 'distorted', False) or \
-            isinstance(camera, TiltedCamera):
-        return LensRenderer(scene, camera, atlas)
+            isinstance(camera, TiltedCamera) or margin_deg > 0:
+        return LensRenderer(scene, camera, atlas, margin_deg)
     return Renderer(scene, camera, atlas)
 
 
-def _source_camera(camera: CameraModel, rays: np.ndarray) -> CameraModel:
+def _source_camera(camera: CameraModel, rays: np.ndarray, margin_deg: float = 0.0
+                   ) -> CameraModel:
     """Return the column camera the target's rays are resampled from (module doc)."""
+    extra = math.tan(math.radians(margin_deg))
     if camera.kind == 'fisheye':
         f = float(camera.fx)  # type: ignore[attr-defined]
         width = int(math.ceil(2.0 * math.pi * f))
@@ -69,15 +75,15 @@ def _source_camera(camera: CameraModel, rays: np.ndarray) -> CameraModel:
     if camera.kind == 'panoramic':   # a tilted panorama: a taller level one
         slope = np.abs(rays[:, 1]) / np.maximum(np.hypot(rays[:, 0], rays[:, 2]), 1e-9)
         f_y = camera.width / (2.0 * math.pi)
-        half = f_y * min(float(slope.max()), math.tan(math.radians(MAX_ELEVATION_DEG)))
+        half = f_y * min(float(slope.max()) + extra, math.tan(math.radians(MAX_ELEVATION_DEG)))
         return PanoramicCamera(camera.width, int(2 * math.ceil(half) + 4))
     if camera.kind != 'pinhole':
         raise VisibilityBuilderError(f'no lens renderer for a {camera.kind} camera')
     fx, fy = float(camera.fx), float(camera.fy)  # type: ignore[attr-defined]
     x, y = rays[:, 0] / rays[:, 2], rays[:, 1] / rays[:, 2]
-    margin = 2.0
-    left, right = fx * x.min() - margin, fx * x.max() + margin
-    top, bottom = fy * y.min() - margin, fy * y.max() + margin
+    margin_x, margin_y = 2.0 + fx * extra * 2.0, 2.0 + fy * extra * 2.0
+    left, right = fx * x.min() - margin_x, fx * x.max() + margin_x
+    top, bottom = fy * y.min() - margin_y, fy * y.max() + margin_y
     width, height = int(math.ceil(right - left)) + 1, int(math.ceil(bottom - top)) + 1
     if max(width, height) > _MAX_SOURCE_SIDE:
         raise VisibilityBuilderError(f'the lens distortion spreads the view over a {width} '
@@ -92,48 +98,61 @@ def _round_trips(camera: CameraModel, uv: np.ndarray, rays: np.ndarray) -> np.nd
 
 
 class LensRenderer:
-    """Render a distorted pinhole or a fisheye through a column camera (module doc).
+    """Render a distorted pinhole, a fisheye or a tilted camera through a column camera.
 
     Args:
         scene: the floor plan.
-        camera: the target camera (``kind`` fisheye, or a pinhole with distortion).
+        camera: the target camera (module docstring).
         atlas: wall textures; built from the scene when ``None``.
+        margin_deg: the source also covers frames tilted this much more (vibration).
     """
 
     def __init__(self, scene: Scene, camera: CameraModel,
-                 atlas: WallAtlas | None = None) -> None:
+                 atlas: WallAtlas | None = None, margin_deg: float = 0.0) -> None:
         self.scene = scene
         self.camera = camera
         u, v = np.meshgrid(np.arange(camera.width, dtype=float),
                            np.arange(camera.height, dtype=float))
-        rays = camera.unproject(np.column_stack([u.ravel(), v.ravel()]))
-        self.source = _source_camera(camera, rays)
+        pixels = np.column_stack([u.ravel(), v.ravel()])
+        # The untilted lens's rays, kept for frames with a tilt of their own.
+        self._lens = camera.camera if isinstance(camera, TiltedCamera) else camera
+        self._lens_rays = self._lens.unproject(pixels)
+        rays = camera.unproject(pixels)
+        self.source = _source_camera(camera, rays, margin_deg)
         self.inner = Renderer(scene, self.source, atlas)
         self.atlas = self.inner.atlas
-        uv, _ = self.source.project(rays)
-        shape = (camera.height, camera.width)
+        self._shape = (camera.height, camera.width)
         # Pixels beyond the lens model (a wide fisheye's corners): no ray comes back to
         # them; a real lens leaves them dark.
-        self._outside = ~_round_trips(camera, np.column_stack([u.ravel(), v.ravel()]),
-                                      rays).reshape(shape)
+        self._outside = ~_round_trips(self._lens, pixels, self._lens_rays).reshape(
+            self._shape)
+        self._map_x, self._map_y = self._maps(rays)
+
+    def _maps(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        uv, _ = self.source.project(rays)
         # Rays the source cannot show (straight up or down) go off its rows: the
         # nearest row (BORDER_REPLICATE) is the floor or the ceiling there.
         uv = np.where(np.isfinite(uv), uv, -1e6)
-        self._map_x = uv[:, 0].reshape(shape).astype(np.float32)
-        self._map_y = np.clip(uv[:, 1], -1.0, self.source.height).reshape(shape).astype(
+        map_x = uv[:, 0].reshape(self._shape).astype(np.float32)
+        map_y = np.clip(uv[:, 1], -1.0, self.source.height).reshape(self._shape).astype(
             np.float32)
+        return map_x, map_y
 
     def render(self, pose: np.ndarray, *, encoding: str = 'bgr8',
                effects: ImageEffects | None = None, rng: np.random.Generator | None = None,
-               with_points: bool = False) -> Rendering:
+               with_points: bool = False, tilt: np.ndarray | None = None) -> Rendering:
         """Render the target camera's image from ``pose`` (as :meth:`Renderer.render`).
 
+        ``tilt``: this frame's own tilt of the lens (:mod:`vbn_common.geometry.mount`),
+        in place of the camera's (vibration); it should stay within the margin.
         ``rho`` and ``segment`` are the source camera's, per source column.
         """
+        map_x, map_y = (self._map_x, self._map_y) if tilt is None else \
+            self._maps(self._lens_rays @ np.asarray(tilt, float).reshape(3, 3).T)
         source = self.inner.render(pose, encoding=encoding, with_points=with_points)
         # Past the source's last row or column: the nearest (a panorama's projection
         # already wraps its columns; rows past the top and bottom are ceiling and floor).
-        image = cv2.remap(source.image, self._map_x, self._map_y, cv2.INTER_LINEAR,
+        image = cv2.remap(source.image, map_x, map_y, cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_REPLICATE)
         image[self._outside] = 0
         if effects is not None and effects.active:
@@ -142,7 +161,7 @@ class LensRenderer:
             image = apply_effects(image, effects, rng)
         points = None
         if with_points and source.wall_points is not None:
-            points = cv2.remap(source.wall_points, self._map_x, self._map_y,
+            points = cv2.remap(source.wall_points, map_x, map_y,
                                cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
                                borderValue=(np.nan,) * 3)
             points[self._outside] = np.nan

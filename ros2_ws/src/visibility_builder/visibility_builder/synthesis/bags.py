@@ -92,6 +92,9 @@ class BagSpec:
         camera_roll_deg: the mount's roll about the optical axis, degrees.
         camera_height: the camera's height above the floor, metres (``None``: the
             scene's).
+        vibration_deg: per-frame random pitch and roll of the robot (normal, this
+            standard deviation, degrees) on top of the mount; the ground truth pose
+            carries them.
         spacing: exploration grid spacing, metres.
         clearance: minimum distance from an exploration pose to a wall, metres.
         seed: seeds odometry noise and image effects.
@@ -116,6 +119,7 @@ class BagSpec:
     camera_pitch_deg: float = 0.0
     camera_roll_deg: float = 0.0
     camera_height: float | None = None
+    vibration_deg: float = 0.0
     spacing: float = 0.25
     clearance: float = 0.2
     seed: int = 0
@@ -152,6 +156,9 @@ class BagSpec:
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 45):
                 raise VisibilityBuilderError(f'{name.replace("_deg", "")} must be within 45 '
                                              f'degrees, got {getattr(self, name)}')
+        if not (math.isfinite(self.vibration_deg) and 0 <= self.vibration_deg <= 5):
+            raise VisibilityBuilderError(f'vibration must be 0 to 5 degrees, got '
+                                         f'{self.vibration_deg}')
         if self.camera_height is not None and not (math.isfinite(self.camera_height)
                                                    and self.camera_height > 0):
             raise VisibilityBuilderError(f'camera height must be positive, got '
@@ -278,7 +285,8 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
         if spec.kind == 'run-kidnapped':
             trajectory = kidnapped_trajectory(trajectory)
         frames = []
-    renderer = make_renderer(scene, camera)
+    vibration = float(spec.vibration_deg)
+    renderer = make_renderer(scene, camera, margin_deg=4.0 * vibration)
     info = camera.camera_info()
     with BagWriter(out) as writer:
         bag = _Bag(writer, spec.compression is not None, trajectory is not None)
@@ -288,8 +296,15 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
 
         def write_image(index: int, stamp: int, pose: np.ndarray) -> None:
             rng = np.random.default_rng([spec.seed, index])
+            shake = None
+            if vibration:   # this frame's pitch and roll, within four sigma
+                pitch, roll = np.clip(np.random.default_rng([spec.seed, index, 7]).normal(
+                    0.0, vibration, 2), -4.0 * vibration, 4.0 * vibration)
+                shake = tilt_matrix(float(pitch), float(roll))
+            mount = spec.mount_tilt()
             image = renderer.render(pose, encoding=spec.encoding, effects=spec.effects,
-                                    rng=rng).image
+                                    rng=rng, **({} if shake is None else {'tilt': (
+                                        shake if mount is None else shake @ mount)})).image
             if spec.compression is None:
                 message = messages.image_message(stamp, image)
             else:
@@ -297,7 +312,8 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
                                                             spec.jpeg_quality)
             bag.write(bag.image_topic, stamp, message)
             bag.write(names.CAMERA_INFO, stamp, messages.camera_info_message(stamp, info))
-            bag.write(names.GROUND_TRUTH_POSE, stamp, messages.pose_stamped_message(stamp, pose))
+            bag.write(names.GROUND_TRUTH_POSE, stamp,
+                      messages.pose_stamped_message(stamp, pose, tilt=shake))
 
         if trajectory is None:
             for index, (stamp, pose) in enumerate(frames):

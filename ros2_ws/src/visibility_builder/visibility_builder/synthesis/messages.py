@@ -108,11 +108,22 @@ def _pose(x: float, y: float, z: float, quaternion: tuple[float, ...] | np.ndarr
         orientation=_T['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2], w=q[3]))
 
 
-def pose_stamped_message(stamp_ns: int, pose: np.ndarray, frame_id: str = MAP_FRAME) -> Any:
-    """Return a ``geometry_msgs/PoseStamped`` for a planar pose ``(x, y, yaw)``."""
+def pose_stamped_message(stamp_ns: int, pose: np.ndarray, frame_id: str = MAP_FRAME,
+                         tilt: np.ndarray | None = None) -> Any:
+    """Return a ``geometry_msgs/PoseStamped`` for a planar pose ``(x, y, yaw)``.
+
+    ``tilt`` (a camera tilt of :mod:`vbn_common.geometry.mount`, in the optical frame)
+    pitches and rolls the base with it: the pose of a shaking robot.
+    """
     x, y, yaw = (float(v) for v in pose)
+    quaternion = yaw_quaternion(yaw)
+    if tilt is not None:
+        body = BASE_TO_CAMERA_ROTATION @ np.asarray(tilt, float) @ BASE_TO_CAMERA_ROTATION.T
+        c, s = np.cos(yaw), np.sin(yaw)
+        rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]) @ body
+        quaternion = Rotation.from_matrix(rotation).as_quat()
     return _T['geometry_msgs/msg/PoseStamped'](header=header(stamp_ns, frame_id),
-                                               pose=_pose(x, y, 0.0, yaw_quaternion(yaw)))
+                                               pose=_pose(x, y, 0.0, quaternion))
 
 
 def transform(stamp_ns: int, parent: str, child: str, translation: tuple[float, float, float],
