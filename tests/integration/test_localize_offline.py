@@ -116,6 +116,24 @@ def test_a_run_camera_at_another_resolution_is_read_with_its_own_camera_info(
     assert result['accuracy']['translation_median_m'] <= 0.02, result
 
 
+def test_a_run_camera_on_another_mount_is_levelled_with_its_own_tf_static(
+        room_db: Path, tmp_path) -> None:
+    # Issue 15: a second robot whose camera is pitched 2 degrees, against the database
+    # of a level one; its /tf_static says so.
+    run = tmp_path / 'pitched_run'
+    made = vbn('render', '--scene', 'room', '--kind', 'run', '--camera-pitch', '2',
+               '--duration', '6', '--compressed', '--out', str(run))
+    assert made.returncode == 0, made.stderr
+    figures = tmp_path / 'figures.json'
+    proc = vbn('localize', '--db', str(room_db), str(run), '--out', str(tmp_path / 'poses'),
+               '--json', str(figures), '--no-evo')
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert 'mounted at pitch 2.00' in proc.stderr
+    result = json.loads(figures.read_text())
+    assert result['availability'] >= 0.9, result
+    assert result['accuracy']['translation_median_m'] <= 0.015, result
+
+
 def test_a_run_of_another_place_warns_that_nothing_was_recognised(room_db: Path,
                                                                   tmp_path) -> None:
     run = tmp_path / 'floor_run'

@@ -132,6 +132,12 @@ def test_camera_mismatch() -> None:
     distorted.d = [0.12, 0.0, 0.0, 0.0, 0.0]
     camera, problem = frame_camera(distorted, lens)
     assert problem == '' and camera.d == (0.12, 0.0, 0.0, 0.0, 0.0)
+    # The run's own mount: its rays are levelled with it.
+    from vbn_common.geometry.mount import TiltedCamera, tilt_matrix
+    camera, problem = frame_camera(camera_info(panorama), panorama, tilt_matrix(2.0, 0.0))
+    assert problem == '' and isinstance(camera, TiltedCamera)
+    assert camera.tilt == pytest.approx(tilt_matrix(2.0, 0.0))
+    assert frame_camera(camera_info(panorama), panorama, np.eye(3)) == (panorama, '')
     distorted.d = [0.1, 0.0, 0.0, 0.0]   # four coefficients for plumb_bob
     assert camera_mismatch(distorted, lens).startswith(
         'CameraInfo cannot be used (plumb_bob distortion takes 5 coefficients, got 4)')

@@ -33,14 +33,17 @@ def _distortion(camera: CameraModel) -> str:
     return f'{camera.distortion_model} d=[{", ".join(f"{v:g}" for v in d)}]'  # type: ignore
 
 
-def frame_camera(info: Any, expected: CameraModel) -> tuple[CameraModel | None, str]:
+def frame_camera(info: Any, expected: CameraModel, tilt: np.ndarray | None = None
+                 ) -> tuple[CameraModel | None, str]:
     """Return the camera of a run's ``CameraInfo``, or why the database cannot take it.
 
     A run camera may differ from the database's in image size, ``K`` and distortion
     coefficients (another resolution, another calibration of the same kind of lens):
-    its frames are then read with their own model, with the database camera's mount
-    tilt. Refused: a CameraInfo that cannot be read, another kind of camera
-    (cylindrical panorama, pinhole, fisheye) or another distortion model.
+    its frames are then read with their own model, with the run's mount ``tilt``
+    (``base_link -> camera`` from its ``/tf_static``; ``None``: the database camera's,
+    :mod:`vbn_common.geometry.mount`). Refused: a CameraInfo that cannot be read,
+    another kind of camera (cylindrical panorama, pinhole, fisheye) or another
+    distortion model.
 
     Returns:
         ``(camera, '')`` (``expected`` itself when the two are the same camera), or
@@ -63,12 +66,15 @@ def frame_camera(info: Any, expected: CameraModel) -> tuple[CameraModel | None, 
                       f'{wanted} {lens_expected or "none"}')
     d_expected = np.asarray(expected.camera_info().d, float)
     d = np.asarray(camera.camera_info().d, float)
-    if (camera.width == expected.width and camera.height == expected.height
+    expected_tilt = getattr(expected, 'tilt', np.eye(3))
+    tilt = expected_tilt if tilt is None else np.asarray(tilt, float).reshape(3, 3)
+    if (np.allclose(tilt, expected_tilt, atol=1e-9) and camera.width == expected.width
+            and camera.height == expected.height
             and np.allclose(k, k_expected, rtol=1e-6, atol=1e-6)
             and d.shape == d_expected.shape and np.allclose(d, d_expected, rtol=1e-6,
                                                             atol=1e-9)):
         return expected, ''
-    return tilted(camera, getattr(expected, 'tilt', None)), ''
+    return tilted(camera, tilt), ''
 
 
 def _model(camera: CameraModel) -> str:

@@ -30,6 +30,7 @@ from vbn_common.bags import deserialize
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraModel
 from vbn_common.geometry.frames import wrap_angle
+from vbn_common.geometry.mount import tilt_angles
 from vbn_common.images import decode_image
 
 __all__ = ['OfflineRun', 'check_run_camera', 'coverage_split', 'evaluate_offline',
@@ -212,13 +213,21 @@ def check_run_camera(run: RunBag, camera: CameraModel, db: str) -> CameraModel:
 
     The run's first ``CameraInfo`` gives it (:func:`~landmark_localizer.camera_check.
     frame_camera`: the same kind and distortion model as the database's, at any size
-    and calibration); a run without one must have the database camera's image size.
+    and calibration) and its ``/tf_static`` the mount's tilt; a run without a
+    CameraInfo must have the database camera's image size.
 
     Raises:
         LocalizerError: the cameras differ, or the first image cannot be decoded.
     """
+    if run.camera_tilt is not None:
+        pitch, roll = tilt_angles(run.camera_tilt)
+        base = tilt_angles(getattr(camera, 'tilt', np.eye(3)))
+        if max(abs(pitch - base[0]), abs(roll - base[1])) > 0.01:
+            _LOG.info('the run camera is mounted at pitch %.2f, roll %.2f deg (the '
+                      "database's: %.2f, %.2f): its rays are levelled with its own mount",
+                      pitch, roll, *base)
     if run.camera_info is not None:
-        run_camera, problem = frame_camera(run.camera_info, camera)
+        run_camera, problem = frame_camera(run.camera_info, camera, run.camera_tilt)
         if run_camera is None:
             raise LocalizerError(f'{run.path} does not fit {db}: {problem}')
         return run_camera

@@ -30,6 +30,8 @@ from vbn_common import names
 from vbn_common.bags import TYPESTORE, BagWriter, default_qos, deserialize, open_bag
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.frames import quaternion_yaw, yaw_quaternion
+from vbn_common.geometry.mount import level_tilt
+from vbn_common.tf_buffer import quaternion_matrices
 
 __all__ = ['PoseBag', 'PoseRecord', 'RunBag', 'read_pose_bag', 'read_run_bag',
            'write_pose_bag']
@@ -62,6 +64,9 @@ class RunBag:
         truth_poses: (g, 3) ``base_link`` poses in ``map``.
         truth_messages: The ground-truth messages as ``(bag time, msgtype, CDR)``.
         camera_info: The first ``/camera/camera_info`` message (None without one).
+        camera_tilt: ``(3, 3)`` the run camera's pitch and roll on ``base_link`` from
+            ``/tf_static`` (:mod:`vbn_common.geometry.mount`; the identity when level),
+            None without that transform.
     """
 
     path: Path
@@ -75,6 +80,7 @@ class RunBag:
     truth_poses: np.ndarray
     truth_messages: list[tuple[int, str, bytes]]
     camera_info: Any = None
+    camera_tilt: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -182,8 +188,9 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
             raise LocalizerError(f'bag {path} has no image topic '
                                  f'({image_topic or RAW_TOPIC + " or " + COMPRESSED_TOPIC})')
         image_type = topics[image_topic].msgtype
-        wanted = [t for t in (image_topic, ODOM_TOPIC, TRUTH_TOPIC, names.CAMERA_INFO)
-                  if t in topics]
+        wanted = [t for t in (image_topic, ODOM_TOPIC, TRUTH_TOPIC, names.CAMERA_INFO,
+                              names.TF_STATIC) if t in topics]
+        static: list[Any] = []
         camera_info = None
         stamps: list[int] = []
         images: list[bytes] = []
@@ -213,6 +220,8 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
                     truth_messages.append((bag_ns, msgtype, raw))
                 elif topic == names.CAMERA_INFO and camera_info is None:
                     camera_info = deserialize(raw, msgtype)
+                elif topic == names.TF_STATIC:
+                    static.extend(deserialize(raw, msgtype).transforms)
         except VbnCommonError as error:
             raise LocalizerError(f'bag {path}: {error}') from None
     if not images:
@@ -221,9 +230,25 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
     truth_stamps, truth_poses = _sorted(*truth)
     _LOG.info('read %s: %d images (%s), %d odometry, %d ground-truth poses', path,
               len(images), image_topic, len(odom_stamps), len(truth_stamps))
+    camera_frame = (getattr(getattr(camera_info, 'header', None), 'frame_id', '')
+                    or names.CAMERA_FRAME).lstrip('/')
     return RunBag(Path(path), image_topic, image_type, np.asarray(stamps, np.int64), images,
                   odom_stamps, odom_poses, truth_stamps, truth_poses, truth_messages,
-                  camera_info)
+                  camera_info, _mount_tilt(static, camera_frame))
+
+
+def _mount_tilt(transforms: list[Any], camera_frame: str) -> np.ndarray | None:
+    """Return the tilt of ``base_link -> camera_frame`` in ``/tf_static``, if there."""
+    for t in transforms:
+        if (t.header.frame_id.lstrip('/') == names.BASE_FRAME
+                and t.child_frame_id.lstrip('/') == camera_frame):
+            q = t.transform.rotation
+            rotation = quaternion_matrices(np.array([[q.x, q.y, q.z, q.w]], float))[0]
+            try:
+                return level_tilt(rotation)
+            except VbnCommonError:
+                return None
+    return None
 
 
 def _header(stamp_ns: int, frame: str) -> Any:
