@@ -76,6 +76,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from std_msgs.msg import Int32
 from std_srvs.srv import Empty
+from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from landmark_db.database import LandmarkDatabase, open_database
@@ -356,6 +357,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
             self.camera_info_seen = False
             self.camera_problem = ''
             self.camera_key: tuple | None = None
+            self.mount_tilt = None
             self.transform = None
         self.first_image: float | None = None
         self.last_stamp: int | None = None
@@ -388,6 +390,9 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                 sensor_qos),
             sub(CameraInfo, relative(names.CAMERA_INFO),
                 self._guarded(names.CAMERA_INFO, self._on_camera_info), sensor_qos),
+            # The robot's own camera mount (a second robot sharing the database).
+            sub(TFMessage, relative(names.TF_STATIC),
+                self._guarded(names.TF_STATIC, self._on_tf_static), LATCHED_QOS),
             sub(Image, relative(names.IMAGE_RAW), self._on_image, frame_qos),
             sub(CompressedImage, relative(names.IMAGE_COMPRESSED), self._on_image, frame_qos),
             sub(PoseWithCovarianceStamped, relative(names.INITIAL_POSE),

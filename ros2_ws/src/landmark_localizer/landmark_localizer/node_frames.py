@@ -22,6 +22,7 @@ from landmark_localizer.localizer import Frame
 from landmark_localizer.node_support import reason_kind
 from landmark_localizer.odometry import ACCEPTED, JUMP, TIME_BACK
 from vbn_common import names
+from vbn_common.geometry.mount import static_mount_tilt, tilt_angles
 from vbn_common.geometry.transforms import StampedTransform, correction
 from vbn_common.images import ImageDecodeError, decode_image
 
@@ -71,6 +72,25 @@ class FrameHandling:
             self.warnings.warn('odom_back', f'{odom} stamps went back: odometry history '
                                'restarted')
 
+    def _on_tf_static(self, msg: Any) -> None:
+        """Take the camera's mount from ``base_link -> camera`` (its pitch and roll)."""
+        loaded = self.loaded
+        if loaded is None:
+            return
+        frames = loaded.index.database.info.frames
+        tilt = static_mount_tilt(msg.transforms, frames.get('base', names.BASE_FRAME),
+                                 frames.get('camera', names.CAMERA_FRAME))
+        if tilt is None:
+            return
+        with self.lock:
+            if self.mount_tilt is not None and np.allclose(tilt, self.mount_tilt, atol=1e-9):
+                return
+            self.mount_tilt = tilt
+            self.camera_key = None      # the next CameraInfo makes the frames' camera
+        pitch, roll = tilt_angles(tilt)
+        self.log.info(f'camera mount from {self.topic(names.TF_STATIC)}: pitch {pitch:.2f} '
+                      f'deg, roll {roll:.2f} deg')
+
     def _on_camera_info(self, msg: Any) -> None:
         loaded = self.loaded
         if loaded is None:
@@ -84,7 +104,7 @@ class FrameHandling:
                 return
             changed = self.camera_key is not None
             self.camera_key = key
-            camera, problem = frame_camera(msg, loaded.index.camera)
+            camera, problem = frame_camera(msg, loaded.index.camera, self.mount_tilt)
             was = self.camera_problem
             self.camera_problem = problem
             if camera is not None:   # the frames' own camera (another resolution, say)

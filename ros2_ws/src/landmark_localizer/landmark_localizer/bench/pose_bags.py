@@ -30,8 +30,7 @@ from vbn_common import names
 from vbn_common.bags import TYPESTORE, BagWriter, default_qos, deserialize, open_bag
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.frames import quaternion_yaw, yaw_quaternion
-from vbn_common.geometry.mount import level_tilt
-from vbn_common.tf_buffer import quaternion_matrices
+from vbn_common.geometry.mount import static_mount_tilt
 
 __all__ = ['PoseBag', 'PoseRecord', 'RunBag', 'read_pose_bag', 'read_run_bag',
            'write_pose_bag']
@@ -234,21 +233,7 @@ def read_run_bag(path: str | os.PathLike[str], limit: int | None = None,
                     or names.CAMERA_FRAME).lstrip('/')
     return RunBag(Path(path), image_topic, image_type, np.asarray(stamps, np.int64), images,
                   odom_stamps, odom_poses, truth_stamps, truth_poses, truth_messages,
-                  camera_info, _mount_tilt(static, camera_frame))
-
-
-def _mount_tilt(transforms: list[Any], camera_frame: str) -> np.ndarray | None:
-    """Return the tilt of ``base_link -> camera_frame`` in ``/tf_static``, if there."""
-    for t in transforms:
-        if (t.header.frame_id.lstrip('/') == names.BASE_FRAME
-                and t.child_frame_id.lstrip('/') == camera_frame):
-            q = t.transform.rotation
-            rotation = quaternion_matrices(np.array([[q.x, q.y, q.z, q.w]], float))[0]
-            try:
-                return level_tilt(rotation)
-            except VbnCommonError:
-                return None
-    return None
+                  camera_info, static_mount_tilt(static, names.BASE_FRAME, camera_frame))
 
 
 def _header(stamp_ns: int, frame: str) -> Any:

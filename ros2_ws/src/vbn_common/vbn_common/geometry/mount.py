@@ -26,7 +26,8 @@ import numpy as np
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraInfoFields, CameraModel
 
-__all__ = ['TiltedCamera', 'level_frame', 'level_tilt', 'tilt_angles', 'tilt_matrix', 'tilted']
+__all__ = ['TiltedCamera', 'level_frame', 'level_tilt', 'static_mount_tilt', 'tilt_angles',
+           'tilt_matrix', 'tilted']
 
 #: Below this tilt (degrees) a camera counts as level.
 LEVEL_DEG = 1e-6
@@ -77,6 +78,32 @@ def level_tilt(base_to_camera: np.ndarray) -> np.ndarray:
     """
     rotation = np.asarray(base_to_camera, float).reshape(3, 3)
     return level_frame(rotation[:, 2]).T @ rotation
+
+
+def static_mount_tilt(transforms: Any, base_frame: str, camera_frame: str
+                      ) -> np.ndarray | None:
+    """Return the tilt of ``base_frame -> camera_frame`` among ``TransformStamped``s.
+
+    ``None`` when no such transform is there or it looks straight up or down.
+    """
+    for t in transforms:
+        if (t.header.frame_id.lstrip('/') == base_frame.lstrip('/')
+                and t.child_frame_id.lstrip('/') == camera_frame.lstrip('/')):
+            q = t.transform.rotation
+            x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
+            norm = math.sqrt(x * x + y * y + z * z + w * w)
+            if not norm > 0:
+                return None
+            x, y, z, w = x / norm, y / norm, z / norm, w / norm
+            rotation = np.array([
+                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+            try:
+                return level_tilt(rotation)
+            except VbnCommonError:
+                return None
+    return None
 
 
 def tilted(camera: CameraModel, tilt: Any) -> CameraModel:
