@@ -60,7 +60,7 @@ import numpy as np
 from vbn_common.bags import open_bag
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraModel, camera_from_info
-from vbn_common.geometry.mount import level_frame, level_tilt, tilt_angles, tilted
+from vbn_common.geometry.mount import level_frames, level_tilt, tilt_angles, tilted
 from vbn_common.images import EncodedImage, ImageDecodeError, check_image
 from vbn_common.names import (
     BASE_FRAME,
@@ -537,17 +537,13 @@ def _frame_tilts(camera_r: np.ndarray, valid: np.ndarray, mount: np.ndarray | No
 
     ``None`` where it does not (by less than 0.001 degrees) or the frame is invalid.
     """
+    tilts = np.einsum('nji,njk->nik', level_frames(camera_r[:, :, 2]), camera_r)
     mount = np.eye(3) if mount is None else mount
-    tilts: list[np.ndarray | None] = [None] * len(camera_r)
-    for i in np.flatnonzero(valid):
-        try:
-            tilt = level_frame(camera_r[i][:, 2]).T @ camera_r[i]
-        except VbnCommonError:
-            continue
-        cosine = (np.trace(mount.T @ tilt) - 1.0) / 2.0
-        if np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) > 1e-3:
-            tilts[i] = tilt
-    return tilts
+    cosine = (np.einsum('ji,nji->n', mount, tilts) - 1.0) / 2.0   # trace(mount^T tilt)
+    with np.errstate(invalid='ignore'):
+        off = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) > 1e-3
+    keep = valid & off & np.isfinite(tilts).all(axis=(1, 2))
+    return [tilts[i] if keep[i] else None for i in range(len(camera_r))]
 
 
 def _mount_tilt(rotations: np.ndarray, found: np.ndarray, camera_frame: str,

@@ -25,8 +25,10 @@ import numpy as np
 
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import CameraInfoFields, CameraModel
+from vbn_common.tf_buffer import quaternion_matrices
 
-__all__ = ['TiltedCamera', 'level_frame', 'level_tilt', 'static_mount_tilt', 'tilt_angles',
+__all__ = ['TiltedCamera', 'level_frame', 'level_frames', 'level_tilt', 'static_mount_tilt',
+           'tilt_angles',
            'tilt_matrix', 'tilted']
 
 #: Below this tilt (degrees) a camera counts as level.
@@ -55,18 +57,29 @@ def level_frame(forward: np.ndarray) -> np.ndarray:
     """Return the level frame's axes ``[x y z]`` (columns, in the parent's coordinates).
 
     Args:
-        forward: ``(3,)`` the optical axis in a parent frame whose ``z`` is up.
+        forward: ``(3,)`` the optical axis in a parent frame whose ``z`` is up, or
+            ``(n, 3)`` such axes for ``(n, 3, 3)`` frames.
 
     Raises:
         VbnCommonError: a camera looking straight up or down.
     """
-    forward = np.asarray(forward, float).reshape(3)
-    horizontal = math.hypot(forward[0], forward[1])
-    if not horizontal > 1e-6:
+    forward = np.asarray(forward, float)
+    frames = level_frames(forward.reshape(-1, 3))
+    if not np.all(np.isfinite(frames)):
         raise VbnCommonError('the camera looks straight up or down: no heading')
-    z = np.array([forward[0] / horizontal, forward[1] / horizontal, 0.0])
-    y = np.array([0.0, 0.0, -1.0])
-    return np.column_stack([np.cross(y, z), y, z])
+    return frames.reshape(forward.shape[:-1] + (3, 3))
+
+
+def level_frames(forward: np.ndarray) -> np.ndarray:
+    """Return ``(n, 3, 3)`` level frames of ``(n, 3)`` optical axes; NaN looking up or down."""
+    forward = np.asarray(forward, float).reshape(-1, 3)
+    horizontal = np.hypot(forward[:, 0], forward[:, 1])
+    with np.errstate(invalid='ignore', divide='ignore'):
+        scale = np.where(horizontal > 1e-6, 1.0 / horizontal, np.nan)
+    z = np.column_stack([forward[:, 0] * scale, forward[:, 1] * scale,
+                         np.zeros(len(forward))])
+    y = np.broadcast_to([0.0, 0.0, -1.0], z.shape)
+    return np.stack([np.cross(y, z), y, z], axis=2)
 
 
 def level_tilt(base_to_camera: np.ndarray) -> np.ndarray:
@@ -90,15 +103,9 @@ def static_mount_tilt(transforms: Any, base_frame: str, camera_frame: str
         if (t.header.frame_id.lstrip('/') == base_frame.lstrip('/')
                 and t.child_frame_id.lstrip('/') == camera_frame.lstrip('/')):
             q = t.transform.rotation
-            x, y, z, w = float(q.x), float(q.y), float(q.z), float(q.w)
-            norm = math.sqrt(x * x + y * y + z * z + w * w)
-            if not norm > 0:
+            rotation = quaternion_matrices(np.array([q.x, q.y, q.z, q.w], float))[0]
+            if not np.all(np.isfinite(rotation)):
                 return None
-            x, y, z, w = x / norm, y / norm, z / norm, w / norm
-            rotation = np.array([
-                [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
             try:
                 return level_tilt(rotation)
             except VbnCommonError:
