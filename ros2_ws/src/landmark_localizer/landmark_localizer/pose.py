@@ -20,6 +20,7 @@ from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.tilt_refinement import marginal_covariance, refine_tilted
 from vbn_common.errors import VbnCommonError
+from vbn_common.geometry.camera import pixels_per_radian
 from vbn_common.geometry.epipolar import pointwise_planar_residuals
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 from vbn_common.geometry.localize import PoseEstimate, position_from_views
@@ -52,12 +53,6 @@ class PoseSolution:
 TILT_GAIN = 0.3
 
 
-def _focal(index: DatabaseIndex) -> float:
-    """Pixels per radian at the centre of the frames' camera (its thresholds' unit)."""
-    camera = index.frame_camera
-    return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)  # type: ignore
-
-
 def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
                uv: np.ndarray, config: LocalizerConfig, rng: np.random.Generator,
                predicted: np.ndarray | None = None) -> PoseSolution | None:
@@ -82,7 +77,7 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     Returns:
         The solution, or None when fewer than two views give a trustworthy motion.
     """
-    focal = _focal(index)
+    focal = pixels_per_radian(index.frame_camera)
     two_view = TwoViewConfig(threshold_px=max(1.0, 0.75 * config.max_residual_px))
     poses, motions, kept, outliers = [], [], [], set()
     total, worst = 0, 0.0
@@ -247,7 +242,7 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         The solution, or None when fewer than two views have ``min_inliers`` inliers,
         the step diverges, or the residual exceeds ``max_residual_px``.
     """
-    focal = _focal(index)
+    focal = pixels_per_radian(index.frame_camera)
     data = _correspondences(index, region, class_ids, uv, config.min_inliers)
     if data is None:
         return None

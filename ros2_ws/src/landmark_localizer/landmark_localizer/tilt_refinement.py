@@ -54,6 +54,12 @@ def _levelling(pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
     return _M @ (rx @ rz) @ _M.T
 
 
+def _prior(noise: float, tilt_prior_deg: float, height_prior_m: float) -> np.ndarray:
+    """Return the prior rows' weights per unknown, in units of the measurement noise."""
+    tilt = 1.0 / math.radians(tilt_prior_deg)
+    return np.array([0.0, 0.0, 0.0, tilt, tilt, 1.0 / height_prior_m]) * noise
+
+
 def tilted_residuals(states: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
                      rays_model: np.ndarray, rays_current: np.ndarray) -> np.ndarray:
     """Return the ``(m, n)`` Sampson angular errors of ``m`` states (module docstring).
@@ -110,8 +116,7 @@ def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
         step cannot be solved.
     """
     state = np.r_[np.asarray(initial, float)[:3], 0.0, 0.0, 0.0]
-    prior = np.array([0, 0, 0, 1.0 / math.radians(tilt_prior_deg),
-                      1.0 / math.radians(tilt_prior_deg), 1.0 / height_prior_m]) * noise
+    prior = _prior(noise, tilt_prior_deg, height_prior_m)
     args = (view_poses, view, rays_model, rays_current)
     for _ in range(iterations):
         both = tilted_residuals(np.vstack([state, state + np.diag(_STEP)]), *args)
@@ -134,8 +139,7 @@ def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
 def marginal_covariance(jac: np.ndarray, sigma2: float, noise: float,
                         tilt_prior_deg: float, height_prior_m: float) -> np.ndarray | None:
     """Return the ``(3, 3)`` covariance of ``(x, y, yaw)``, the tilt and height marginalised."""
-    prior = np.array([0, 0, 0, 1.0 / math.radians(tilt_prior_deg),
-                      1.0 / math.radians(tilt_prior_deg), 1.0 / height_prior_m]) * noise
+    prior = _prior(noise, tilt_prior_deg, height_prior_m)
     try:
         full = np.linalg.inv(jac.T @ jac + np.diag(prior ** 2 * sigma2 / noise ** 2))
     except np.linalg.LinAlgError:

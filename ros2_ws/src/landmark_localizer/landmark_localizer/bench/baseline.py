@@ -38,7 +38,7 @@ from landmark_localizer.errors import LocalizerError
 from landmark_localizer.localizer import LOST, TRACKING, Estimate, Frame
 from vbn_common.errors import VbnCommonError
 from vbn_common.features import SiftConfig, extract_features, extract_many
-from vbn_common.geometry.camera import CameraModel, camera_from_info
+from vbn_common.geometry.camera import CameraModel, camera_from_info, pixels_per_radian
 from vbn_common.geometry.frames import compose_poses, invert_pose
 from vbn_common.geometry.localize import position_from_views
 from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
@@ -264,7 +264,7 @@ class FullDatabaseLocalizer:
         counts = np.bincount(views)
         order = np.argsort(-counts, kind='stable')[:config.candidates]
         solved: list[tuple[int, int, RelativeMotion]] = []
-        focal = _focal(self.camera)
+        focal = pixels_per_radian(self.camera)
         for view in order:
             if counts[view] < config.min_inliers:
                 break
@@ -293,5 +293,3 @@ class FullDatabaseLocalizer:
         return None
 
 
-def _focal(camera: CameraModel) -> float:
-    return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)

@@ -66,7 +66,9 @@ __all__ = [
     'PanoramicCamera',
     'PinholeCamera',
     'camera_from_info',
+    'camera_info_fields',
     'make_camera',
+    'pixels_per_radian',
 ]
 
 _IDENTITY_K_ROW3 = (0.0, 0.0, 1.0)
@@ -275,12 +277,8 @@ class PanoramicCamera(CameraModel):
 
     def camera_info(self) -> CameraInfoFields:
         """Return the ``'cylindrical'`` CameraInfo fields (module docstring)."""
-        f, fy, cx, y0 = self.f_az, self.f_vertical, self.cx, self.horizon_row
-        return CameraInfoFields(
-            width=self.width, height=self.height, distortion_model='cylindrical', d=(),
-            k=(f, 0.0, cx, 0.0, fy, y0, 0.0, 0.0, 1.0),
-            r=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
-            p=(f, 0.0, cx, 0.0, 0.0, fy, y0, 0.0, 0.0, 0.0, 1.0, 0.0))
+        return camera_info_fields(self.width, self.height, 'cylindrical', (), self.f_az,
+                                  self.f_vertical, self.cx, self.horizon_row)
 
 
 @dataclass(frozen=True)
@@ -394,13 +392,31 @@ class PinholeCamera(CameraModel):
 
     def camera_info(self) -> CameraInfoFields:
         """Return the CameraInfo fields (zero ``plumb_bob`` distortion if none)."""
-        fx, fy, cx, cy = self.fx, self.fy, self.cx, self.cy
-        return CameraInfoFields(
-            width=self.width, height=self.height, distortion_model=self.distortion_model,
-            d=self.d or (0.0,) * lens.coefficient_count(self.distortion_model),
-            k=(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0),
-            r=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
-            p=(fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0))
+        return camera_info_fields(
+            self.width, self.height, self.distortion_model,
+            self.d or (0.0,) * lens.coefficient_count(self.distortion_model),
+            self.fx, self.fy, self.cx, self.cy)
+
+
+def camera_info_fields(width: int, height: int, model: str, d: tuple[float, ...], fx: float,
+                       fy: float, cx: float, cy: float) -> CameraInfoFields:
+    """Return CameraInfo fields with ``K = [fx, 0, cx; 0, fy, cy; 0, 0, 1]``.
+
+    ``R`` is the identity and ``P = [K | 0]``.
+    """
+    return CameraInfoFields(
+        width=width, height=height, distortion_model=model, d=tuple(d),
+        k=(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0),
+        r=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
+        p=(fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0))
+
+
+def pixels_per_radian(camera: CameraModel) -> float:
+    """Return the pixels per radian at the image centre: a panorama's ``f_az``, else ``fx``.
+
+    The unit that turns pixel thresholds into the solvers' angles.
+    """
+    return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)  # type: ignore
 
 
 def make_camera(kind: str, width: int | None = None, height: int | None = None,

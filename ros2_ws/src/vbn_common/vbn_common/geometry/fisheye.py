@@ -21,7 +21,13 @@ import numpy as np
 
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry import lens
-from vbn_common.geometry.camera import CameraInfoFields, CameraModel, _check_size, _coefficients
+from vbn_common.geometry.camera import (
+    CameraInfoFields,
+    CameraModel,
+    _check_size,
+    _coefficients,
+    camera_info_fields,
+)
 
 __all__ = ['FisheyeCamera']
 
@@ -116,26 +122,12 @@ class FisheyeCamera(CameraModel):
             (theta <= self._limit) & self._inside(uv)  # type: ignore[attr-defined]
         return uv, valid
 
-    @property
-    def horizon_row(self) -> float:
-        """Return ``cy`` (the image row of the level optical axis)."""
-        return self.cy
-
-    @property
-    def f_vertical(self) -> float:
-        """Return ``fy``."""
-        return self.fy
-
     def column_geometry(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Raise: a fisheye has none (a vertical world line is curved in its image)."""
         raise VbnCommonError('a fisheye camera has no column geometry')
 
     def camera_info(self) -> CameraInfoFields:
         """Return ``'equidistant'`` CameraInfo fields."""
-        fx, fy, cx, cy = self.fx, self.fy, self.cx, self.cy
-        return CameraInfoFields(
-            width=self.width, height=self.height, distortion_model='equidistant',
-            d=self.d or (0.0, 0.0, 0.0, 0.0),
-            k=(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0),
-            r=(1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0),
-            p=(fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0))
+        return camera_info_fields(self.width, self.height, 'equidistant',
+                                  self.d or (0.0, 0.0, 0.0, 0.0), self.fx, self.fy, self.cx,
+                                  self.cy)

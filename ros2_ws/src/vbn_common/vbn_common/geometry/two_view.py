@@ -57,7 +57,7 @@ import math
 import numpy as np
 
 from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.camera import CameraModel
+from vbn_common.geometry.camera import CameraModel, pixels_per_radian
 from vbn_common.geometry.essential import general_essential
 from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
 from vbn_common.geometry.panoramic_planar import panoramic_planar_motion
@@ -72,11 +72,6 @@ METHODS = ('panoramic_planar', 'pinhole_planar', 'general_essential')
 #: Default method per camera kind (the database's camera model picks the method).
 DEFAULT_METHOD = {'panoramic': 'panoramic_planar', 'pinhole': 'pinhole_planar',
                   'fisheye': 'pinhole_planar'}
-
-
-def _focal(camera: CameraModel) -> float:
-    """Pixels per radian at the image centre (panorama: ``f_az``; pinhole, fisheye: ``fx``)."""
-    return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)
 
 
 def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: CameraModel, *,
@@ -118,7 +113,7 @@ def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: Camera
     uv_current = np.asarray(uv_current, dtype=float).reshape(-1, 2)
     rays_model = camera.unproject(uv_model)
     rays_current = (current_camera or camera).unproject(uv_current)
-    f = _focal(camera)
+    f = pixels_per_radian(camera)
     common = {'threshold': config.threshold_px / f, 'noise_floor': config.noise_floor_px / f,
               'min_parallax': config.min_parallax_px / f,
               'min_parallax_ratio': config.min_parallax_ratio, 'rng': rng}

@@ -287,6 +287,7 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
         frames = []
     vibration = float(spec.vibration_deg)
     renderer = make_renderer(scene, camera, margin_deg=4.0 * vibration)
+    mount = np.eye(3) if spec.mount_tilt() is None else spec.mount_tilt()
     info = camera.camera_info()
     with BagWriter(out) as writer:
         bag = _Bag(writer, spec.compression is not None, trajectory is not None)
@@ -301,10 +302,9 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
                 pitch, roll = np.clip(np.random.default_rng([spec.seed, index, 7]).normal(
                     0.0, vibration, 2), -4.0 * vibration, 4.0 * vibration)
                 shake = tilt_matrix(float(pitch), float(roll))
-            mount = spec.mount_tilt()
-            image = renderer.render(pose, encoding=spec.encoding, effects=spec.effects,
-                                    rng=rng, **({} if shake is None else {'tilt': (
-                                        shake if mount is None else shake @ mount)})).image
+            own = {} if shake is None else {'tilt': shake @ mount}   # a lens renderer's
+            image = renderer.render(pose, encoding=spec.encoding, effects=spec.effects, rng=rng,
+                                    **own).image
             if spec.compression is None:
                 message = messages.image_message(stamp, image)
             else:
