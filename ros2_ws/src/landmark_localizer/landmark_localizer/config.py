@@ -66,6 +66,15 @@ class LocalizerConfig:
             deviation (:mod:`.tilt_refinement`), and kept when they cut the epipolar
             cost to under a third; 0 refines the planar pose only.
         height_prior_m: prior standard deviation of the frame's height offset, metres.
+        absolute_min_inliers: where no region verifies, the pose is computed from the
+            frame's matches to the database's triangulated class points
+            (:mod:`.absolute_pose`) with at least this many inliers (twice this without
+            a recent pose to check it against); 0 disables it.
+        absolute_ratio: Lowe's ratio of those matches.
+        absolute_threshold_px: their inlier threshold, pixels.
+        absolute_min_spread_deg: least spread of the inliers' bearings, degrees.
+        absolute_prior_s: a pose at most this old (carried by the motion) bounds the
+            absolute pose to ``max_jump_m`` from it.
         seed: random generator seed of the robust solvers.
     """
 
@@ -98,6 +107,11 @@ class LocalizerConfig:
     hint_radius_m: float = 1.5
     tilt_prior_deg: float = 1.0
     height_prior_m: float = 0.1
+    absolute_min_inliers: int = 15
+    absolute_ratio: float = 0.8
+    absolute_threshold_px: float = 3.0
+    absolute_min_spread_deg: float = 20.0
+    absolute_prior_s: float = 3.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -108,13 +122,16 @@ class LocalizerConfig:
         if self.method not in ('', 'panoramic_planar', 'pinhole_planar', 'general_essential'):
             raise LocalizerError(f'unknown method {self.method!r} (expected panoramic_planar, '
                                  f'pinhole_planar, general_essential or empty)')
-        for name in ('vote_ratio', 'verify_ratio', 'vote_scale'):
+        for name in ('vote_ratio', 'verify_ratio', 'vote_scale', 'absolute_ratio'):
             if not 0 < getattr(self, name) <= 1:
                 raise LocalizerError(f'{name} must be in (0, 1], got {getattr(self, name)}')
         for name in ('vote_candidates', 'min_inliers', 'min_tracked', 'lk_window',
                      'handover_frames'):
             if getattr(self, name) < 1:
                 raise LocalizerError(f'{name} must be >= 1, got {getattr(self, name)}')
+        if self.absolute_min_inliers < 0:
+            raise LocalizerError(f'absolute_min_inliers must be >= 0, got '
+                                 f'{self.absolute_min_inliers}')
         if self.vote_checks < 0:
             raise LocalizerError(f'vote_checks must be >= 0, got {self.vote_checks}')
         if self.lk_window % 2 == 0:

@@ -12,6 +12,10 @@ States:
   solve fails twice, or the pose jumps away from the prediction: kidnapped), the
   image votes among the region graph's neighbours first, then globally.
 
+Where no region verifies, the frame still gets a pose when its matches to the
+database's triangulated class points fix one (:mod:`.absolute_pose`, event
+``'absolute'``): the state stays LOST and the next frame votes again.
+
 Counters (:attr:`Localizer.stats`) separate region changes by prediction from those
 after a loss, as the thesis's switching rule is meant to make the second kind rare.
 Time going backwards (a bag that loops) resets the state.
@@ -25,6 +29,7 @@ import time
 import numpy as np
 
 from landmark_db.database import LandmarkDatabase
+from landmark_localizer.absolute_pose import absolute_solution, refine_on_points
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
@@ -98,6 +103,7 @@ class Stats:
     lost_switches: int = 0
     falls_to_lost: int = 0
     resets: int = 0
+    absolute_poses: int = 0
     events: dict[str, int] = field(default_factory=dict)
 
 
@@ -132,6 +138,8 @@ class Localizer:
         self.last_stamp: int | None = None
         self.hint: tuple[np.ndarray, float] | None = None
         self._failures = 0
+        self._features = None  # this frame's voting features and their nearest classes
+        self._last_camera: np.ndarray | None = None  # the last published camera pose
 
     # -- control --------------------------------------------------------------------------
     def reset(self) -> None:
@@ -142,6 +150,7 @@ class Localizer:
         self.predictor.reset()
         self._failures = 0
         self._handover = -1
+        self._last_camera = None
         self.stats.resets += 1
 
     def set_config(self, config: LocalizerConfig) -> None:
@@ -164,6 +173,7 @@ class Localizer:
         self.hint = (np.array([x, y], float), radius or self.config.hint_radius_m)
         self.state, self.region = LOST, -1
         self._handover = -1
+        self._last_camera = None
         self.tracker.reset()
 
     # -- one frame ------------------------------------------------------------------------
@@ -181,6 +191,7 @@ class Localizer:
         self.last_stamp = frame.stamp_ns
         self.stats.frames += 1
         self.tracker.next_frame()
+        self._features = None
         solution: PoseSolution | None = None
         tracked = 0
         if self.state == TRACKING:
@@ -193,17 +204,43 @@ class Localizer:
             event = self._vote_global(image, frame) or event
             if self.state == TRACKING:
                 solution, tracked = self._last_solution, len(self.tracker.tracks)
+        if self.state == LOST and self.config.absolute_min_inliers > 0:
+            solution = self._absolute(image, frame)
+            if solution is not None:
+                tracked = solution.inliers
+                event = event or 'absolute'
+                self.stats.absolute_poses += 1
         self.tracker.prev_image = image
         return self._estimate(frame, solution, tracked, event, start)
 
     # -- LOST: voting ---------------------------------------------------------------------
+    def _vote_features(self, image: np.ndarray):  # noqa: ANN202 - (features, nearest)
+        """This frame's voting features and their nearest classes (computed once)."""
+        if self._features is None:
+            features = extract_features_scaled(image, self.config.vote_scale, self.sift,
+                                               self.detector)
+            nearest = self.index.nearest_classes(features.descriptors, self.config.vote_checks)
+            self._features = (features, nearest)
+        return self._features
+
+    def _absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
+        """The pose from the class points when no region verified (None: none found)."""
+        features, nearest = self._vote_features(image)
+        prior = None
+        if self._last_camera is not None and self.last_pose_stamp is not None and \
+                (frame.stamp_ns - self.last_pose_stamp) / 1e9 <= self.config.absolute_prior_s:
+            prior = self._last_camera
+            v = self.predictor.velocity()
+            if v is not None:
+                prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
+        return absolute_solution(self.index, features, nearest, self.config, self.rng, prior)
+
     def _best_verified(self, image: np.ndarray, allowed: np.ndarray | None
                        ) -> Verified | None:
-        features = extract_features_scaled(image, self.config.vote_scale, self.sift,
-                                           self.detector)
+        features, nearest = self._vote_features(image)
         self.stats.votes += 1
         best: Verified | None = None
-        for candidate in vote(features, self.index, self.config, allowed):
+        for candidate in vote(features, self.index, self.config, allowed, nearest):
             found = verify(features, self.index.regions[candidate.region], self.index,
                            self.config, self.rng)
             if found is not None and (best is None or found.solution.inliers >
@@ -309,6 +346,9 @@ class Localizer:
         if solution is None:
             solution = solve_pose(self.index, region, tracks.class_ids,
                                   tracks.uv.astype(float), config, self.rng, predicted)
+        if solution is not None and self.config.absolute_min_inliers > 0:
+            solution = refine_on_points(self.index, tracks.class_ids,
+                                        tracks.uv.astype(float), solution, config) or solution
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
             if jump > config.max_jump_m:
@@ -443,7 +483,7 @@ class Localizer:
             event = event or 'predicted_switch'
             self._switched = False
         pose = cov = camera = None
-        if solution is not None and self.state == TRACKING:
+        if solution is not None and (self.state == TRACKING or solution.views_used == 0):
             est = solution.estimate
             cov_ok = np.all(np.isfinite(est.covariance)) and \
                 np.sqrt(max(est.covariance[0, 0], est.covariance[1, 1])) <= \
@@ -454,6 +494,7 @@ class Localizer:
                 cov = _carry_covariance(est.covariance, camera, self.index.camera_mount)
                 self.stats.poses += 1
                 self.last_pose_stamp = frame.stamp_ns
+                self._last_camera = camera
                 self.predictor.add(frame.stamp_ns, pose, frame.odom)
         if event:
             self.stats.events[event] = self.stats.events.get(event, 0) + 1

@@ -64,7 +64,9 @@ class Verified:
 
 
 def vote(features: ImageFeatures, index: DatabaseIndex, config: LocalizerConfig,
-         allowed: np.ndarray | None = None) -> list[Candidate]:
+         allowed: np.ndarray | None = None,
+         nearest: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+         ) -> list[Candidate]:
     """Return the candidate regions, most votes first (at most ``vote_candidates``).
 
     Args:
@@ -72,10 +74,12 @@ def vote(features: ImageFeatures, index: DatabaseIndex, config: LocalizerConfig,
         index: The database index.
         config: Voting settings.
         allowed: Region indices to consider (None: all).
+        nearest: ``index.nearest_classes`` of the features, if already computed.
     """
     if len(features) == 0:
         return []
-    best, d1, d_other = index.nearest_classes(features.descriptors, config.vote_checks)
+    best, d1, d_other = nearest if nearest is not None else \
+        index.nearest_classes(features.descriptors, config.vote_checks)
     good = (best >= 0) & (d1 <= config.vote_max_distance) & (d1 < config.vote_ratio * d_other)
     matched = np.zeros(index.n_classes, np.float64)
     matched[np.unique(best[good])] = 1.0

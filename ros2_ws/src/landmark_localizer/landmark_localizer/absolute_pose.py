@@ -1,0 +1,402 @@
+"""The camera pose from the database's 3-D class points, where no region serves (issue 15).
+
+The thesis localizes only inside a region: the two model views and the region's k
+features give the pose (7.4, 7.5). A camera that does not see all around leaves much
+of its pose space without k features visible from every pose of a neighbourhood
+(close to a wall, turned towards a bare corner), and the decomposition then has no
+region there. The database still holds what a structure-based localizer needs: every
+class seen by two model views has a triangulated point (``DatabaseIndex.points``).
+When voting finds no region, :func:`solve_absolute` computes the pose from the
+frame's SIFT matches to those points, so the robot keeps a pose between regions
+(the localizer stays LOST and votes again on the next frame).
+
+Model: the camera at ``(x, y)`` in ``map``, at the exploration's camera height (the
+points' ``z`` is measured from it), heading ``yaw``; a frame's rays are levelled by the
+mount already (:class:`~vbn_common.geometry.mount.TiltedCamera`).
+
+- Hypotheses: three matches fix the planar pose linearly. A ray with horizontal
+  direction ``(a, b)`` in the camera's base frame through the point ``(X, Y)`` gives
+  ``c (X b - Y a) + s (X a + Y b) + p a + q b = 0`` with ``c, s = cos yaw, sin yaw``,
+  ``p = y c - x s`` and ``q = -(x c + y s)``: three points give the null vector of a
+  3 x 4 matrix, normalised to ``c^2 + s^2 = 1``, its sign chosen so the points lie in
+  front. RANSAC draws the samples in one vectorised batch and scores them by the
+  angle between each observed ray and the direction to its point (3-D).
+- Refinement: Gauss-Newton with Huber weights on the angular errors of the inliers,
+  over ``(x, y, yaw)`` and the frame's own pitch, roll and height offset, each of
+  these three with a Gaussian prior (vibration, an uneven floor, another robot's
+  camera height: :mod:`.tilt_refinement` does the same on the epipolar errors).
+- Acceptance: at least ``min_inliers`` inliers whose bearings span at least
+  ``min_spread`` radians (points in one narrow patch pin the pose poorly).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.pose import PoseSolution
+from vbn_common.features import ImageFeatures
+from vbn_common.geometry.camera import pixels_per_radian
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, wrap_angle
+from vbn_common.geometry.localize import PoseEstimate
+
+__all__ = ['AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses', 'refine_absolute',
+           'solve_absolute']
+
+
+@dataclass(frozen=True)
+class AbsolutePose:
+    """A camera pose from 2D-3D matches.
+
+    Attributes:
+        pose: (3,) camera pose ``(x, y, yaw)`` in ``map``.
+        covariance: (3, 3) covariance of the pose (the tilt and height marginalised).
+        inliers: (n,) bool over the matches.
+        rms: RMS angular error of the inliers, radians.
+        tilt: ``(pitch, roll, dz)`` the refinement found (radians, radians, metres).
+    """
+
+    pose: np.ndarray
+    covariance: np.ndarray
+    inliers: np.ndarray
+    rms: float
+    tilt: np.ndarray
+
+    @property
+    def n_inliers(self) -> int:
+        """Matches kept."""
+        return int(self.inliers.sum())
+
+
+def base_rays(optical_rays: np.ndarray) -> np.ndarray:
+    """(n, 3) unit rays in the camera's level base frame (x forward, y left, z up)."""
+    rays = np.asarray(optical_rays, float).reshape(-1, 3) @ BASE_TO_CAMERA_ROTATION.T
+    return rays / np.linalg.norm(rays, axis=1, keepdims=True)
+
+
+def hypotheses(rays: np.ndarray, points: np.ndarray, samples: np.ndarray) -> np.ndarray:
+    """Planar camera poses from triples of matches, ``(s, 3)`` (NaN rows: degenerate).
+
+    Args:
+        rays: (n, 3) unit rays in the camera's level base frame.
+        points: (n, 3) their points in ``map`` (``z`` from the camera height).
+        samples: (s, 3) indices of the triples.
+
+    Example:
+        >>> pts = np.array([[3., 0, 0.5], [0, 3, -0.2], [-2, -1, 0.1]])
+        >>> pose = np.array([0.5, -0.2, 0.3])
+        >>> d = pts - [pose[0], pose[1], 0]
+        >>> c, s = np.cos(pose[2]), np.sin(pose[2])
+        >>> r = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], 1)
+        >>> hypotheses(r / np.linalg.norm(r, axis=1)[:, None], pts, np.array([[0, 1, 2]]))
+        ... # doctest: +NORMALIZE_WHITESPACE
+        array([[ 0.5, -0.2,  0.3]])
+    """
+    a, b = rays[samples, 0], rays[samples, 1]
+    centre = points[samples, :2].mean(axis=1)  # conditioning: coordinates near zero
+    x = points[samples, 0] - centre[:, :1]
+    y = points[samples, 1] - centre[:, 1:]
+    design = np.stack([x * b - y * a, x * a + y * b, a, b], axis=2)  # (s, 3, 4)
+    _, _, vt = np.linalg.svd(design)
+    null = vt[:, -1, :]
+    norm = np.hypot(null[:, 0], null[:, 1])
+    out = np.full((len(samples), 3), np.nan)
+    good = norm > 1e-9
+    null = null[good] / norm[good, None]
+    c, s, p, q = null.T
+    px, py = -s * p - c * q, c * p - s * q
+    # The sign: the points in front (the ray's horizontal direction towards them).
+    dx = x[good] - px[:, None]
+    dy = y[good] - py[:, None]
+    along = (c[:, None] * a[good] - s[:, None] * b[good]) * dx + \
+        (s[:, None] * a[good] + c[:, None] * b[good]) * dy
+    flip = along.sum(axis=1) < 0
+    yaw = np.arctan2(s, c) + np.where(flip, math.pi, 0.0)
+    out[good] = np.column_stack([px + centre[good, 0], py + centre[good, 1], wrap_angle(yaw)])
+    return out
+
+
+def _predicted(poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(m, n, 3) unit directions from camera poses to points, in each camera's base frame."""
+    dx = points[None, :, 0] - poses[:, None, 0]
+    dy = points[None, :, 1] - poses[:, None, 1]
+    dz = np.broadcast_to(points[None, :, 2], dx.shape)
+    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+    v = np.stack([c * dx + s * dy, -s * dx + c * dy, dz], axis=2)
+    return v / np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-12)
+
+
+def _angular_errors(poses: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(m, n) angles between the observed rays and the directions to the points."""
+    cos = np.einsum('mnk,nk->mn', _predicted(poses, points), rays)
+    return np.arccos(np.clip(cos, -1.0, 1.0))
+
+
+def _coarse_inliers(poses: np.ndarray, rays: np.ndarray, points: np.ndarray,
+                    threshold: float, tilt_prior: float, height_prior: float) -> np.ndarray:
+    """(m, n) bool: matches a planar hypothesis explains before the tilt is known.
+
+    The bearing (azimuth) within ``threshold``; the elevation within ``threshold``
+    plus three prior deviations of the frame's tilt and of its height offset seen at
+    the point's distance (a pitch of half a degree moves every ray more than a
+    threshold of a few pixels).
+    """
+    v = _predicted(poses, points)
+    azimuth = np.arctan2(v[..., 1], v[..., 0]) - np.arctan2(rays[:, 1], rays[:, 0])
+    azimuth = np.abs((azimuth + math.pi) % (2 * math.pi) - math.pi)
+    horizontal = np.hypot(v[..., 0], v[..., 1])
+    elevation = np.abs(np.arctan2(v[..., 2], horizontal)
+                       - np.arctan2(rays[:, 2], np.hypot(rays[:, 0], rays[:, 1])))
+    distance = np.hypot(points[None, :, 0] - poses[:, None, 0],
+                        points[None, :, 1] - poses[:, None, 1])
+    slack = threshold + 3.0 * tilt_prior + 3.0 * height_prior / np.maximum(distance, 0.5)
+    return (azimuth * horizontal <= threshold) & (elevation <= slack) & \
+        (np.einsum('mnk,nk->mn', v, rays) > 0)
+
+
+def _tilt_rotation(pitch: float, roll: float) -> np.ndarray:
+    """A small extra tilt of the frame, applied to its rays in the base frame."""
+    cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])  # about y (left)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])  # about x (forward)
+    return ry @ rx
+
+
+def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(n, 3) observed ray (tilted by the state) minus the predicted direction."""
+    x, y, yaw, pitch, roll, dz = state
+    turned = rays @ _tilt_rotation(pitch, roll).T
+    shifted = points - np.array([0.0, 0.0, dz])
+    return turned - _predicted(np.array([[x, y, yaw]]), shifted)[0]
+
+
+def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
+                    threshold: float, sigma: float, tilt_prior: float,
+                    height_prior: float, iterations: int = 8
+                    ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Gauss-Newton with Huber weights: ``(state (6,), covariance of (x, y, yaw))``.
+
+    Args:
+        pose: (3,) starting camera pose.
+        rays: (n, 3) unit rays in the camera's level base frame.
+        points: (n, 3) their points.
+        threshold: Huber threshold, radians.
+        sigma: angular noise of a ray (whitens the priors against the data), radians.
+        tilt_prior: prior standard deviation of the frame's pitch and roll, radians
+            (0: kept level).
+        height_prior: prior standard deviation of its height offset, metres (0: none).
+    """
+    state = np.concatenate([np.asarray(pose, float), np.zeros(3)])
+    free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])
+    prior = np.array([0, 0, 0, tilt_prior, tilt_prior, height_prior], float)
+    step = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-5])
+    n_free = int(free.sum())
+    prior_info = np.diag(np.where(prior[free] > 0, (sigma / np.maximum(prior[free], 1e-12)) ** 2,
+                                  0.0))
+    info = None
+    for _ in range(iterations):
+        r = _residuals(state, rays, points)
+        jac = np.empty((len(rays) * 3, n_free))
+        for col, k in enumerate(np.flatnonzero(free)):
+            probe = state.copy()
+            probe[k] += step[k]
+            jac[:, col] = ((_residuals(probe, rays, points) - r) / step[k]).ravel()
+        norms = np.linalg.norm(r, axis=1)
+        weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
+        jw = jac * weights[:, None]
+        info = jw.T @ jac + prior_info
+        gradient = jw.T @ r.ravel() + prior_info @ state[free]
+        try:
+            delta = np.linalg.solve(info + 1e-12 * np.eye(n_free), -gradient)
+        except np.linalg.LinAlgError:
+            return None
+        state[free] += delta
+        state[2] = float(wrap_angle(state[2]))
+        if not np.all(np.isfinite(state)):
+            return None
+        if np.abs(delta[:2]).max() < 1e-5 and abs(delta[2]) < 1e-6:
+            break
+    if info is None:
+        return None
+    try:
+        cov = np.linalg.inv(info)[:3, :3]
+    except np.linalg.LinAlgError:
+        return None
+    return state, cov
+
+
+def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generator, *,
+                   threshold: float, sigma: float, min_inliers: int, min_spread: float,
+                   tilt_prior: float = 0.0, height_prior: float = 0.0,
+                   iterations: int = 256, prior_pose: np.ndarray | None = None,
+                   max_distance: float = math.inf) -> AbsolutePose | None:
+    """Robust camera pose from rays to known points; None when nothing trustworthy.
+
+    Args:
+        rays: (n, 3) unit rays of the frame's matches, camera's level base frame.
+        points: (n, 3) the matched classes' points in ``map``.
+        rng: Random generator of the samples.
+        threshold: inlier angle, radians.
+        sigma: angular noise of a ray, radians (the covariance's scale floor).
+        min_inliers: least inliers accepted.
+        min_spread: least spread of the inliers' horizontal bearings, radians.
+        tilt_prior: see :func:`refine_absolute`.
+        height_prior: see :func:`refine_absolute`.
+        iterations: RANSAC samples.
+        prior_pose: (3,) the predicted camera pose, if any: hypotheses further than
+            ``max_distance`` from it are not considered.
+        max_distance: see ``prior_pose``, metres.
+    """
+    rays = np.asarray(rays, float).reshape(-1, 3)
+    points = np.asarray(points, float).reshape(-1, 3)
+    n = len(rays)
+    if n < max(3, min_inliers):
+        return None
+    samples = np.array([rng.choice(n, 3, replace=False) for _ in range(iterations)])
+    poses = hypotheses(rays, points, samples)
+    ok = np.all(np.isfinite(poses), axis=1)
+    if prior_pose is not None:
+        ok &= np.hypot(*(poses[:, :2] - prior_pose[:2]).T) <= max_distance
+    if not ok.any():
+        return None
+    poses = poses[ok]
+    coarse = _coarse_inliers(poses, rays, points, threshold, tilt_prior, height_prior)
+    best = poses[int(np.argmax(coarse.sum(axis=1)))]
+    inliers = _coarse_inliers(best[None], rays, points, threshold, tilt_prior, height_prior)[0]
+    if inliers.sum() < min_inliers:
+        return None
+    found = refine_absolute(best, rays[inliers], points[inliers], threshold, sigma,
+                            tilt_prior, height_prior)
+    if found is None:
+        return None
+    state, _ = found
+    # Re-select with the refined pose, then refine on the final inliers.
+    turned = rays @ _tilt_rotation(state[3], state[4]).T
+    shifted = points - np.array([0.0, 0.0, state[5]])
+    inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
+    if inliers.sum() < min_inliers or _spread(rays[inliers]) < min_spread:
+        return None
+    found = refine_absolute(state[:3], rays[inliers], points[inliers], threshold, sigma,
+                            tilt_prior, height_prior)
+    if found is None:
+        return None
+    state, cov = found
+    residual = np.linalg.norm(_residuals(state, rays[inliers], points[inliers]), axis=1)
+    rms = float(np.sqrt(np.mean(residual ** 2)))
+    # The information is in units of one ray's variance (the priors whitened by sigma):
+    # scaled by the residuals' own variance, floored at sigma.
+    covariance = cov * max(rms, sigma) ** 2
+    if prior_pose is not None and np.hypot(*(state[:2] - prior_pose[:2])) > max_distance:
+        return None
+    return AbsolutePose(state[:3].copy(), 0.5 * (covariance + covariance.T), inliers, rms,
+                        state[3:].copy())
+
+
+def _spread(rays: np.ndarray) -> float:
+    """Angular extent of the rays' horizontal bearings (the smallest arc holding them)."""
+    if len(rays) < 2:
+        return 0.0
+    bearing = np.sort(np.arctan2(rays[:, 1], rays[:, 0]))
+    gaps = np.diff(np.concatenate([bearing, bearing[:1] + 2 * math.pi]))
+    return float(2 * math.pi - gaps.max())
+
+
+def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
+                      nearest: tuple[np.ndarray, np.ndarray, np.ndarray],
+                      config: LocalizerConfig, rng: np.random.Generator,
+                      prior_pose: np.ndarray | None = None) -> PoseSolution | None:
+    """The frame's camera pose from its matches to the class points, as a pose solve.
+
+    Args:
+        index: The database index (points, the frame's camera).
+        features: The frame's SIFT features (voting's).
+        nearest: ``index.nearest_classes`` of their descriptors.
+        config: ``absolute_*``, ``max_jump_m``, ``tilt_prior_deg``, ``height_prior_m``.
+        rng: Random generator of the samples.
+        prior_pose: (3,) the camera pose the motion predicts from a recent pose, if any.
+
+    Returns:
+        A :class:`~landmark_localizer.pose.PoseSolution` with no model view
+        (``views_used`` 0), or None.
+    """
+    if config.absolute_min_inliers <= 0 or len(features) == 0:
+        return None
+    best, d1, d_other = nearest
+    good = (best >= 0) & (d1 <= config.vote_max_distance) & \
+        (d1 < config.absolute_ratio * d_other)
+    good &= np.all(np.isfinite(index.points[np.maximum(best, 0)]), axis=1)
+    rows = np.flatnonzero(good)
+    if rows.size < config.absolute_min_inliers:
+        return None
+    # One keypoint per class: its nearest.
+    order = rows[np.lexsort((d1[rows], best[rows]))]
+    first = np.concatenate([[True], np.diff(best[order]) != 0])
+    rows = order[first]
+    classes = best[rows]
+    rays = base_rays(index.frame_camera.unproject(features.keypoints[rows].astype(float)))
+    focal = pixels_per_radian(index.frame_camera)
+    need = config.absolute_min_inliers * (1 if prior_pose is not None else 2)
+    found = solve_absolute(
+        rays, index.points[classes], rng, threshold=config.absolute_threshold_px / focal,
+        sigma=0.5 / focal, min_inliers=need,
+        min_spread=math.radians(config.absolute_min_spread_deg),
+        tilt_prior=math.radians(config.tilt_prior_deg), height_prior=config.height_prior_m,
+        prior_pose=prior_pose, max_distance=config.max_jump_m)
+    if found is None:
+        return None
+    x, y, yaw = (float(v) for v in found.pose)
+    estimate = PoseEstimate(x, y, yaw, found.covariance, _spread(rays[found.inliers]),
+                            found.rms, 0, True)
+    return PoseSolution(estimate, np.sort(classes[found.inliers]), 0, found.n_inliers,
+                        found.rms * focal)
+
+
+def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
+                     seed: PoseSolution, config: LocalizerConfig) -> PoseSolution | None:
+    """The tracked features' class points polish a pose solve (None: too few agree).
+
+    The two-view pose (7.4, 7.5) seeds a robust refinement on the angular errors of the
+    tracked features that have a triangulated point; the seed's inlier classes are
+    kept for the tracks. None when fewer than ``min_inliers`` points agree with the
+    refined pose within ``absolute_threshold_px`` or they span less than
+    ``absolute_min_spread_deg``.
+    """
+    points = index.points[class_ids]
+    have = np.all(np.isfinite(points), axis=1)
+    if have.sum() < config.min_inliers:
+        return None
+    rays = base_rays(index.frame_camera.unproject(np.asarray(uv, float)[have]))
+    points = points[have]
+    focal = pixels_per_radian(index.frame_camera)
+    threshold = config.absolute_threshold_px / focal
+    start = np.asarray(seed.estimate.pose, float)
+    inliers = _angular_errors(start[None], rays, points)[0] <= 2.0 * threshold
+    if inliers.sum() < config.min_inliers:
+        return None
+    args = (threshold, 0.5 / focal, math.radians(config.tilt_prior_deg), config.height_prior_m)
+    found = refine_absolute(start, rays[inliers], points[inliers], *args)
+    if found is None:
+        return None
+    state, _ = found
+    turned = rays @ _tilt_rotation(state[3], state[4]).T
+    shifted = points - np.array([0.0, 0.0, state[5]])
+    inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
+    if inliers.sum() < config.min_inliers or \
+            _spread(rays[inliers]) < math.radians(config.absolute_min_spread_deg):
+        return None
+    found = refine_absolute(state[:3], rays[inliers], points[inliers], *args)
+    if found is None:
+        return None
+    state, cov = found
+    residual = np.linalg.norm(_residuals(state, rays[inliers], points[inliers]), axis=1)
+    rms = float(np.sqrt(np.mean(residual ** 2)))
+    cov = cov * max(rms, 0.5 / focal) ** 2
+    est = seed.estimate
+    estimate = PoseEstimate(float(state[0]), float(state[1]), float(state[2]),
+                            0.5 * (cov + cov.T), est.ray_angle, est.residual, est.n_views,
+                            est.in_front)
+    return PoseSolution(estimate, seed.inlier_classes, seed.views_used, seed.inliers,
+                        seed.residual_px)

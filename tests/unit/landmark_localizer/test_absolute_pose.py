@@ -1,0 +1,121 @@
+"""The camera pose from the database's class points (absolute_pose.py)."""
+from __future__ import annotations
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import numpy as np
+
+from landmark_localizer.absolute_pose import base_rays, hypotheses, solve_absolute
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
+from vbn_common.geometry.mount import tilt_matrix
+
+SIGMA = 0.5 / 300.0          # half a pixel at 300 px per radian
+THRESHOLD = 3.0 / 300.0
+
+
+def _points(rng: np.random.Generator, n: int = 80) -> np.ndarray:
+    """Points on the walls of a 6 x 4 m room, between 1 m below and 1 m above the camera."""
+    side = rng.integers(0, 4, n)
+    t = rng.uniform(0, 1, n)
+    x = np.where(side == 0, 0.0, np.where(side == 1, 6.0, 6.0 * t))
+    y = np.where(side == 2, 0.0, np.where(side == 3, 4.0, 4.0 * t))
+    return np.column_stack([x, y, rng.uniform(-1, 1, n)])
+
+
+def _rays(points: np.ndarray, pose: np.ndarray, dz: float = 0.0,
+          tilt: np.ndarray | None = None) -> np.ndarray:
+    """Unit rays in the camera's level base frame (optionally tilted in the optical frame)."""
+    d = points - np.r_[pose[:2], dz]
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    base = np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]])
+    if tilt is not None:
+        optical = (base @ BASE_TO_CAMERA_ROTATION) @ tilt
+        return base_rays(optical)
+    return base / np.linalg.norm(base, axis=1, keepdims=True)
+
+
+def test_three_points_fix_the_pose_by_hand() -> None:
+    # The camera at the origin looking along +x: points ahead, left and behind-right.
+    points = np.array([[2.0, 0.0, 0.3], [0.0, 1.0, -0.1], [-1.0, -1.0, 0.2]])
+    rays = _rays(points, np.zeros(3))
+    np.testing.assert_allclose(hypotheses(rays, points, np.array([[0, 1, 2]])),
+                               [[0.0, 0.0, 0.0]], atol=1e-12)
+
+
+@settings(max_examples=40, derandomize=True, deadline=None)
+@given(x=st.floats(1.0, 5.0), y=st.floats(1.0, 3.0), yaw=st.floats(-math.pi, math.pi),
+       seed=st.integers(0, 1000))
+def test_hypotheses_recover_any_pose_from_exact_rays(x, y, yaw, seed) -> None:
+    rng = np.random.default_rng(seed)
+    points = _points(rng, 12)
+    truth = np.array([x, y, yaw])
+    found = hypotheses(_rays(points, truth), points,
+                       np.array([rng.choice(12, 3, replace=False) for _ in range(5)]))
+    good = np.all(np.isfinite(found), axis=1)
+    assert good.any()
+    np.testing.assert_allclose(found[good, :2], np.tile(truth[:2], (good.sum(), 1)), atol=1e-6)
+    turn = (found[good, 2] - yaw + math.pi) % (2 * math.pi) - math.pi
+    np.testing.assert_allclose(turn, 0.0, atol=1e-6)
+
+
+def test_robust_pose_through_outliers_noise_tilt_and_height() -> None:
+    rng = np.random.default_rng(3)
+    points = _points(rng, 120)
+    truth = np.array([2.2, 1.4, 0.7])
+    tilt = tilt_matrix(0.6, -0.4)
+    rays = _rays(points, truth, dz=0.04, tilt=tilt)
+    rays = rays + rng.normal(0, SIGMA, rays.shape)
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    wrong = rng.choice(120, 60, replace=False)                 # half the matches wrong
+    rays[wrong] = _rays(rng.permutation(points)[:60], truth)
+    found = solve_absolute(rays, points, np.random.default_rng(0), threshold=THRESHOLD,
+                           sigma=SIGMA, min_inliers=15, min_spread=math.radians(20),
+                           tilt_prior=math.radians(1.0), height_prior=0.1)
+    assert found is not None
+    assert np.hypot(*(found.pose[:2] - truth[:2])) < 0.01
+    assert abs(found.pose[2] - truth[2]) < math.radians(0.1)
+    assert abs(found.tilt[2] - 0.04) < 0.01                     # the height offset
+    assert math.hypot(*np.degrees(found.tilt[:2])) > 0.5         # the frame's tilt found
+    assert found.n_inliers >= 55 and found.inliers[wrong].sum() <= 3
+    std = np.sqrt(np.diag(found.covariance))
+    assert 1e-4 < std[0] < 0.02 and 1e-4 < std[1] < 0.02
+
+
+def test_level_camera_without_priors_recovers_the_planar_pose() -> None:
+    rng = np.random.default_rng(4)
+    points = _points(rng, 40)
+    truth = np.array([3.0, 2.0, -2.0])
+    found = solve_absolute(_rays(points, truth), points, np.random.default_rng(1),
+                           threshold=THRESHOLD, sigma=SIGMA, min_inliers=10,
+                           min_spread=0.3)
+    assert found is not None
+    np.testing.assert_allclose(found.pose, truth, atol=1e-6)
+    np.testing.assert_allclose(found.tilt, 0.0)
+
+
+def test_a_narrow_patch_of_points_or_too_few_inliers_is_refused() -> None:
+    rng = np.random.default_rng(5)
+    truth = np.array([1.0, 2.0, 0.0])
+    patch = np.column_stack([np.full(30, 6.0), rng.uniform(1.9, 2.1, 30),
+                             rng.uniform(-0.1, 0.1, 30)])   # 2 degrees wide
+    kwargs = dict(threshold=THRESHOLD, sigma=SIGMA, min_spread=math.radians(20))
+    assert solve_absolute(_rays(patch, truth), patch, np.random.default_rng(0),
+                          min_inliers=10, **kwargs) is None
+    points = _points(rng, 12)
+    assert solve_absolute(_rays(points, truth), points, np.random.default_rng(0),
+                          min_inliers=15, **kwargs) is None
+
+
+def test_the_prior_pose_bounds_the_answer() -> None:
+    rng = np.random.default_rng(6)
+    points = _points(rng, 40)
+    truth = np.array([3.0, 2.0, 0.5])
+    kwargs = dict(threshold=THRESHOLD, sigma=SIGMA, min_inliers=10, min_spread=0.3)
+    near = solve_absolute(_rays(points, truth), points, np.random.default_rng(0),
+                          prior_pose=truth + [0.3, 0, 0], max_distance=0.75, **kwargs)
+    assert near is not None and np.hypot(*(near.pose[:2] - truth[:2])) < 1e-6
+    far = solve_absolute(_rays(points, truth), points, np.random.default_rng(0),
+                         prior_pose=truth + [2.0, 0, 0], max_distance=0.75, **kwargs)
+    assert far is None
