@@ -119,3 +119,78 @@ def test_the_prior_pose_bounds_the_answer() -> None:
     far = solve_absolute(_rays(points, truth), points, np.random.default_rng(0),
                          prior_pose=truth + [2.0, 0, 0], max_distance=0.75, **kwargs)
     assert far is None
+
+
+# -- against a database index (tests/localizer_samples.py) ---------------------------------
+
+def _world():
+    from localizer_samples import synthetic_database, wall_points
+
+    from landmark_localizer.index import DatabaseIndex
+
+    rng = np.random.default_rng(3)
+    points = wall_points(rng, 90)
+    return points, DatabaseIndex(synthetic_database(rng, points))
+
+
+def _frame(points: np.ndarray, pose: np.ndarray, rng: np.random.Generator, wrong: int = 0):
+    """The frame's features at the classes' pixels and 'nearest classes' matching them."""
+    from localizer_samples import project
+
+    from vbn_common.features import ImageFeatures
+
+    uv, ok = project(pose, points)
+    ids = np.flatnonzero(ok)
+    uv = uv[ids] + rng.normal(0, 0.3, (len(ids), 2))
+    classes = ids.copy()
+    classes[rng.choice(len(ids), wrong, replace=False)] = rng.integers(0, len(points), wrong)
+    n = len(ids)
+    features = ImageFeatures(keypoints=uv.astype(np.float32), sizes=np.ones(n, np.float32),
+                             angles=np.zeros(n, np.float32), responses=np.ones(n, np.float32),
+                             descriptors=np.zeros((n, 128), np.float32))
+    return features, (classes.astype(np.int64), np.full(n, 50.0), np.full(n, np.inf)), ids, uv
+
+
+def test_absolute_solution_poses_a_frame_from_the_index_points() -> None:
+    from landmark_localizer.absolute_pose import absolute_solution
+    from landmark_localizer.config import LocalizerConfig
+
+    points, index = _world()
+    truth = np.array([2.3, 1.2, 0.9])
+    rng = np.random.default_rng(7)
+    features, nearest, _, _ = _frame(points, truth, rng, wrong=15)
+    config = LocalizerConfig()
+    found = absolute_solution(index, features, nearest, config, np.random.default_rng(0))
+    assert found is not None and found.views_used == 0
+    assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
+    assert abs(found.estimate.pose[2] - truth[2]) < math.radians(0.1)
+    assert found.inliers >= 2 * config.absolute_min_inliers
+    # Off: nothing; a prior two metres away: nothing either.
+    assert absolute_solution(index, features, nearest,
+                             LocalizerConfig(absolute_min_inliers=0), np.random.default_rng(0)) \
+        is None
+    assert absolute_solution(index, features, nearest, config, np.random.default_rng(0),
+                             truth + [2.0, 0.0, 0.0]) is None
+
+
+def test_tracked_points_polish_a_close_seed_and_reject_a_wrong_one() -> None:
+    from landmark_localizer.absolute_pose import refine_on_points
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.localize import PoseEstimate
+
+    points, index = _world()
+    truth = np.array([2.0, 1.4, -0.3])
+    _, _, ids, uv = _frame(points, truth, np.random.default_rng(8))
+
+    def seed(pose):
+        estimate = PoseEstimate(*pose, np.eye(3) * 1e-4, 0.5, 0.0, 2, True)
+        return PoseSolution(estimate, ids, 2, len(ids), 0.3)
+
+    config = LocalizerConfig()
+    close = refine_on_points(index, ids, uv, seed(truth + [0.03, -0.02, 0.01]), config)
+    assert close is not None and np.hypot(*(close.estimate.pose[:2] - truth[:2])) < 0.005
+    np.testing.assert_array_equal(close.inlier_classes, ids)
+    assert refine_on_points(index, ids, uv, seed(truth + [0.4, 0.2, 0.1]), config) is None
+    few = seed(truth + [0.4, 0.2, 0.1])
+    assert refine_on_points(index, ids[:4], uv[:4], few, config) is few  # nothing to judge by

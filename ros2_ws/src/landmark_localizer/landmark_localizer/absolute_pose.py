@@ -43,8 +43,12 @@ from vbn_common.geometry.camera import pixels_per_radian
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, wrap_angle
 from vbn_common.geometry.localize import PoseEstimate
 
-__all__ = ['AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses', 'refine_absolute',
-           'solve_absolute']
+#: Least tracked features with a point to judge a two-view pose by (polishing it takes
+#: ``min_inliers``).
+JUDGE_POINTS = 5
+
+__all__ = ['JUDGE_POINTS', 'AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses',
+           'refine_absolute', 'refine_on_points', 'solve_absolute']
 
 
 @dataclass(frozen=True)
@@ -158,7 +162,7 @@ def _coarse_inliers(poses: np.ndarray, rays: np.ndarray, points: np.ndarray,
 
 
 def _tilt_rotation(pitch: float, roll: float) -> np.ndarray:
-    """A small extra tilt of the frame, applied to its rays in the base frame."""
+    """Return a small extra tilt of the frame, applied to its rays in the base frame."""
     cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
     ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])  # about y (left)
     rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])  # about x (forward)
@@ -188,6 +192,7 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
         tilt_prior: prior standard deviation of the frame's pitch and roll, radians
             (0: kept level).
         height_prior: prior standard deviation of its height offset, metres (0: none).
+        iterations: at most this many Gauss-Newton steps.
     """
     state = np.concatenate([np.asarray(pose, float), np.zeros(3)])
     free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])
@@ -308,7 +313,7 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
                       nearest: tuple[np.ndarray, np.ndarray, np.ndarray],
                       config: LocalizerConfig, rng: np.random.Generator,
                       prior_pose: np.ndarray | None = None) -> PoseSolution | None:
-    """The frame's camera pose from its matches to the class points, as a pose solve.
+    """Return the frame's camera pose from its matches to the class points, as a solve.
 
     Args:
         index: The database index (points, the frame's camera).
@@ -356,40 +361,47 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
 
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
                      seed: PoseSolution, config: LocalizerConfig) -> PoseSolution | None:
-    """The tracked features' class points polish a pose solve (None: too few agree).
+    """Check and polish a pose solve on the tracked features' class points.
 
     The two-view pose (7.4, 7.5) seeds a robust refinement on the angular errors of the
     tracked features that have a triangulated point; the seed's inlier classes are
-    kept for the tracks. None when fewer than ``min_inliers`` points agree with the
-    refined pose within ``absolute_threshold_px`` or they span less than
-    ``absolute_min_spread_deg``.
+    kept for the tracks. With fewer than :data:`JUDGE_POINTS` such features the seed is
+    returned as it is (nothing to judge it by); when fewer than half of them lie within
+    twice ``absolute_threshold_px`` of where the seed puts them, the seed found a wrong
+    motion (few points on one wall can fit a second one) and None is returned; the seed
+    is also returned when the polished pose keeps fewer than ``min_inliers`` or they span
+    less than ``absolute_min_spread_deg``.
     """
     points = index.points[class_ids]
     have = np.all(np.isfinite(points), axis=1)
-    if have.sum() < config.min_inliers:
-        return None
+    if have.sum() < JUDGE_POINTS:
+        return seed
     rays = base_rays(index.frame_camera.unproject(np.asarray(uv, float)[have]))
     points = points[have]
     focal = pixels_per_radian(index.frame_camera)
     threshold = config.absolute_threshold_px / focal
     start = np.asarray(seed.estimate.pose, float)
-    inliers = _angular_errors(start[None], rays, points)[0] <= 2.0 * threshold
-    if inliers.sum() < config.min_inliers:
+    tilt_prior = math.radians(config.tilt_prior_deg)
+    inliers = _coarse_inliers(start[None], rays, points, 2.0 * threshold, tilt_prior,
+                              config.height_prior_m)[0]
+    if inliers.sum() < 0.5 * len(rays):
         return None
-    args = (threshold, 0.5 / focal, math.radians(config.tilt_prior_deg), config.height_prior_m)
+    if inliers.sum() < config.min_inliers:
+        return seed
+    args = (threshold, 0.5 / focal, tilt_prior, config.height_prior_m)
     found = refine_absolute(start, rays[inliers], points[inliers], *args)
     if found is None:
-        return None
+        return seed
     state, _ = found
     turned = rays @ _tilt_rotation(state[3], state[4]).T
     shifted = points - np.array([0.0, 0.0, state[5]])
     inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
     if inliers.sum() < config.min_inliers or \
             _spread(rays[inliers]) < math.radians(config.absolute_min_spread_deg):
-        return None
+        return seed
     found = refine_absolute(state[:3], rays[inliers], points[inliers], *args)
     if found is None:
-        return None
+        return seed
     state, cov = found
     residual = np.linalg.norm(_residuals(state, rays[inliers], points[inliers]), axis=1)
     rms = float(np.sqrt(np.mean(residual ** 2)))

@@ -22,7 +22,7 @@ Time going backwards (a bag that loops) resets the state.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import logging
 import time
 
@@ -46,6 +46,7 @@ _LOG = logging.getLogger(__name__)
 
 LOST = 'LOST'
 TRACKING = 'TRACKING'
+_VOTED = ('vote', 'neighbour_vote', 'global_vote')
 
 
 @dataclass(frozen=True)
@@ -204,6 +205,11 @@ class Localizer:
             event = self._vote_global(image, frame) or event
             if self.state == TRACKING:
                 solution, tracked = self._last_solution, len(self.tracker.tracks)
+        if event in _VOTED and self.state == TRACKING and solution is not None and \
+                self.config.absolute_min_inliers > 0:
+            # A vote's pose rests on the few features it matched in the model views: the
+            # frame's matches to the class points, near it, pin it better.
+            solution = self._absolute_polish(image, frame, solution)
         if self.state == LOST and self.config.absolute_min_inliers > 0:
             solution = self._absolute(image, frame)
             if solution is not None:
@@ -215,7 +221,7 @@ class Localizer:
 
     # -- LOST: voting ---------------------------------------------------------------------
     def _vote_features(self, image: np.ndarray):  # noqa: ANN202 - (features, nearest)
-        """This frame's voting features and their nearest classes (computed once)."""
+        """Return this frame's voting features and their nearest classes (computed once)."""
         if self._features is None:
             features = extract_features_scaled(image, self.config.vote_scale, self.sift,
                                                self.detector)
@@ -224,7 +230,7 @@ class Localizer:
         return self._features
 
     def _absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
-        """The pose from the class points when no region verified (None: none found)."""
+        """Return the pose from the class points when no region verified (or None)."""
         features, nearest = self._vote_features(image)
         prior = None
         if self._last_camera is not None and self.last_pose_stamp is not None and \
@@ -234,6 +240,19 @@ class Localizer:
             if v is not None:
                 prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
         return absolute_solution(self.index, features, nearest, self.config, self.rng, prior)
+
+    def _absolute_polish(self, image: np.ndarray, frame: Frame, solution: PoseSolution
+                         ) -> PoseSolution:
+        """Return the vote's solution with the absolute pose near it, when one is found."""
+        features, nearest = self._vote_features(image)
+        found = absolute_solution(self.index, features, nearest, self.config, self.rng,
+                                  solution.estimate.pose)
+        if found is None:
+            return solution
+        polished = replace(solution, estimate=found.estimate)
+        self._last_solution = polished
+        self.camera_pose = found.estimate.pose
+        return polished
 
     def _best_verified(self, image: np.ndarray, allowed: np.ndarray | None
                        ) -> Verified | None:
@@ -348,7 +367,7 @@ class Localizer:
                                   tracks.uv.astype(float), config, self.rng, predicted)
         if solution is not None and self.config.absolute_min_inliers > 0:
             solution = refine_on_points(self.index, tracks.class_ids,
-                                        tracks.uv.astype(float), solution, config) or solution
+                                        tracks.uv.astype(float), solution, config)
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
             if jump > config.max_jump_m:
