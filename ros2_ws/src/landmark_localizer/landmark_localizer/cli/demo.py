@@ -24,6 +24,11 @@ shows the estimated and true trajectories over the regions. The last line is
 switching; latency on one core is ``vbn bench-localize``'s); the exit code is 0 only on
 PASS.
 
+``--camera pinhole`` (or ``fisheye``) renders a pinhole room (90 degrees, plumb_bob
+distortion) or a fisheye room (180 degrees, equidistant) into ``OUT`` first, an
+exploration with 8 headings per position and a run (``vbn render``, :data:`LENS_BAGS`;
+kept for the next demo), and checks the real-cameras issue's targets for them.
+
 DDS: the demo runs in its own random ``ROS_DOMAIN_ID`` (unless one is set) with
 localhost discovery, so it neither hears nor disturbs other ROS programs.
 """
@@ -50,6 +55,14 @@ DEMO_BUILD_SETTINGS: tuple[str, ...] = ()
 #: What the demo records of the node (and the ground truth that the player publishes).
 RECORDED_TOPICS = (names.LOCALIZER_POSE, names.LOCALIZER_POSE_WITH_COVARIANCE,
                    names.LOCALIZER_REGION, names.GROUND_TRUTH_POSE, names.DIAGNOSTICS)
+#: ``vbn render`` settings of the demo's lens cameras (the real-cameras issue's rows).
+LENS_BAGS: dict[str, tuple[str, ...]] = {
+    'pinhole': ('--camera', 'pinhole', '--distortion', 'plumb_bob:-0.3,0.08,0.0005,-0.0005,0'),
+    'fisheye': ('--camera', 'fisheye', '--hfov', '180',
+                '--distortion', 'equidistant:0.02,-0.005,0.001,0'),
+}
+#: Headings per position of the lens cameras' explorations.
+LENS_HEADINGS = 8
 #: What the demo plays of the run bag (those the bag has).
 PLAYED_TOPICS = (*names.IMAGE_TOPICS, names.CAMERA_INFO, names.ODOM, names.GROUND_TRUTH_POSE)
 
@@ -63,9 +76,15 @@ def register(subparsers: Any) -> None:
                     'accuracy (evo_ape), availability, switching and latency, with a PNG of '
                     'the trajectories over the regions; ends with PASS or FAIL.')
     parser.add_argument('--out', default='out/demo', help='output folder (out/demo)')
-    parser.add_argument('--exploration', default='bags/room_exploration',
-                        help='exploration bag (bags/room_exploration)')
-    parser.add_argument('--run', default='bags/room_run', help='run bag (bags/room_run)')
+    parser.add_argument('--camera', choices=('panoramic', *LENS_BAGS), default='panoramic',
+                        help='panoramic: the sample bags; pinhole or fisheye: render a room '
+                             'with that lens into OUT first (default panoramic)')
+    parser.add_argument('--exploration', default=None,
+                        help='exploration bag (bags/room_exploration; with --camera pinhole '
+                             'or fisheye OUT/room_exploration_CAMERA, rendered if absent)')
+    parser.add_argument('--run', default=None,
+                        help='run bag (bags/room_run; with --camera pinhole or fisheye '
+                             'OUT/room_run_CAMERA, rendered if absent)')
     parser.add_argument('--db', default=None,
                         help='use this database instead of building OUT/room.db')
     parser.add_argument('--build-set', action='append', default=None, metavar='NAME=VALUE',
@@ -139,12 +158,13 @@ def run(args: argparse.Namespace) -> int:
     env = _env()
     print(f'vbn demo: output in {out}, ROS_DOMAIN_ID={env["ROS_DOMAIN_ID"]}, localhost '
           'discovery', flush=True)
+    _bags(args, out, env)
     if args.db:
         db = Path(args.db)
         if not db.is_file():
             raise LocalizerError(f'database {db} does not exist')
     else:
-        db = out / 'room.db'
+        db = out / ('room.db' if args.camera == 'panoramic' else f'room_{args.camera}.db')
         t = _step(f'1/5 build the database of {args.exploration}')
         argv = _vbn() + ['build', args.exploration, '--db', str(db), '--quiet']
         for item in (args.build_set if args.build_set is not None else DEMO_BUILD_SETTINGS):
@@ -198,10 +218,43 @@ def run(args: argparse.Namespace) -> int:
     _step('5/5 evaluate the recording')
     from landmark_localizer.bench.demo import evaluate_demo
 
-    passed = evaluate_demo(out, recorded, db, Path(args.run), args.scene)
+    passed = evaluate_demo(out, recorded, db, Path(args.run), args.scene,
+                           lens=args.camera != 'panoramic')
     print(f'(demo took {time.perf_counter() - start:.0f} s)')
     print('PASS' if passed else 'FAIL', flush=True)
     return 0 if passed else 1
+
+
+def _bags(args: argparse.Namespace, out: Path, env: dict[str, str]) -> None:
+    """Fill in the exploration and run bags, rendering a lens camera's into OUT."""
+    from landmark_localizer.errors import LocalizerError
+
+    if args.camera == 'panoramic':
+        args.exploration = args.exploration or 'bags/room_exploration'
+        args.run = args.run or 'bags/room_run'
+        return
+    lens = LENS_BAGS[args.camera]
+    wanted = (('exploration', ('--kind', 'exploration', '--headings', str(LENS_HEADINGS))),
+              ('run', ('--kind', 'run')))
+    for kind, extra in wanted:
+        if getattr(args, kind):
+            continue
+        bag = out / f'room_{kind}_{args.camera}'
+        setattr(args, kind, str(bag))
+        if (bag / 'metadata.yaml').is_file():
+            continue
+        if bag.exists():
+            shutil.rmtree(bag)  # a render that did not finish
+        t = _step(f'0/5 render {bag} ({args.camera})')
+        argv = _vbn() + ['render', '--scene', 'room', *extra, *lens, '--compressed',
+                         '--out', str(bag)]
+        with (out / f'render_{kind}.log').open('w') as log:
+            done = subprocess.run(argv, stdout=log, stderr=subprocess.STDOUT, env=env,
+                                  check=False)
+        if done.returncode != 0:
+            raise LocalizerError(f'vbn render failed (exit {done.returncode}); see '
+                                 f'{out / f"render_{kind}.log"}')
+        print(f'   rendered in {time.perf_counter() - t:.0f} s')
 
 
 def _played_topics(run_bag: Path) -> list[str]:
