@@ -83,13 +83,23 @@ class FrameHandling:
         if tilt is None:
             return
         with self.lock:
-            if self.mount_tilt is not None and np.allclose(tilt, self.mount_tilt, atol=1e-9):
+            before = self.mount_tilt
+            if before is not None and np.allclose(tilt, before, atol=1e-9):
                 return
             self.mount_tilt = tilt
             self.camera_key = None      # the next CameraInfo makes the frames' camera
         pitch, roll = tilt_angles(tilt)
-        self.log.info(f'camera mount from {self.topic(names.TF_STATIC)}: pitch {pitch:.2f} '
-                      f'deg, roll {roll:.2f} deg')
+        if before is None:
+            self.log.info(f'camera mount from {self.topic(names.TF_STATIC)}: pitch '
+                          f'{pitch:.2f} deg, roll {roll:.2f} deg')
+            return
+        # A static transform that changes mid-run: a remounted camera or a wrong
+        # publisher; the frames from now on are levelled with the new one.
+        was = [round(v, 2) + 0.0 for v in tilt_angles(before)]  # no "-0.00"
+        now = [round(v, 2) + 0.0 for v in (pitch, roll)]
+        self.log.warning(f'the camera mount in {self.topic(names.TF_STATIC)} changed while '
+                         f'running: pitch {was[0]:.2f} -> {now[0]:.2f} deg, roll {was[1]:.2f} '
+                         f'-> {now[1]:.2f} deg; the next frames are levelled with the new one')
 
     def _on_camera_info(self, msg: Any) -> None:
         loaded = self.loaded
