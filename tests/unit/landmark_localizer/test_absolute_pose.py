@@ -194,3 +194,19 @@ def test_tracked_points_polish_a_close_seed_and_reject_a_wrong_one() -> None:
     assert refine_on_points(index, ids, uv, seed(truth + [0.4, 0.2, 0.1]), config) is None
     few = seed(truth + [0.4, 0.2, 0.1])
     assert refine_on_points(index, ids[:4], uv[:4], few, config) is few  # nothing to judge by
+
+
+def test_the_odometry_carries_the_last_pose_through_a_turn_on_the_spot() -> None:
+    from landmark_localizer.switching import MotionPredictor
+
+    predictor = MotionPredictor()
+    assert predictor.by_odometry(np.zeros(3)) is None            # no pose yet
+    predictor.add(0, np.array([2.0, 1.0, math.pi / 2]), np.array([10.0, 5.0, 0.0]))
+    # Odometry: 0.5 m ahead, then a quarter turn left, in its own frame.
+    now = predictor.by_odometry(np.array([10.5, 5.0, math.pi / 2]))
+    np.testing.assert_allclose(now[:2], [2.0, 1.5], atol=1e-12)
+    assert abs(math.remainder(now[2] - math.pi, 2 * math.pi)) < 1e-12
+    assert predictor.velocity() is None                           # one pose: no velocity
+    assert predictor.by_odometry(None) is None
+    predictor.add(10**8, np.array([2.0, 1.5, 3.0]), None)         # a pose without odometry
+    assert predictor.by_odometry(np.array([10.5, 5.0, 0.0])) is None

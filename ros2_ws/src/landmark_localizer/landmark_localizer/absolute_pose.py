@@ -360,7 +360,8 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
 
 
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
-                     seed: PoseSolution, config: LocalizerConfig) -> PoseSolution | None:
+                     seed: PoseSolution, config: LocalizerConfig, strict: bool = False
+                     ) -> PoseSolution | None:
     """Check and polish a pose solve on the tracked features' class points.
 
     The two-view pose (7.4, 7.5) seeds a robust refinement on the angular errors of the
@@ -370,12 +371,13 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     twice ``absolute_threshold_px`` of where the seed puts them, the seed found a wrong
     motion (few points on one wall can fit a second one) and None is returned; the seed
     is also returned when the polished pose keeps fewer than ``min_inliers`` or they span
-    less than ``absolute_min_spread_deg``.
+    less than ``absolute_min_spread_deg``. ``strict`` (a vote, which no prediction
+    checks): None as well when there are too few points to judge by.
     """
     points = index.points[class_ids]
     have = np.all(np.isfinite(points), axis=1)
     if have.sum() < JUDGE_POINTS:
-        return seed
+        return None if strict else seed
     rays = base_rays(index.frame_camera.unproject(np.asarray(uv, float)[have]))
     points = points[have]
     focal = pixels_per_radian(index.frame_camera)

@@ -38,7 +38,7 @@ from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
 from vbn_common.features import SiftConfig, extract_features_scaled
-from vbn_common.geometry.frames import invert_pose
+from vbn_common.geometry.frames import compose_poses, invert_pose
 
 __all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
 
@@ -235,9 +235,14 @@ class Localizer:
         prior = None
         if self._last_camera is not None and self.last_pose_stamp is not None and \
                 (frame.stamp_ns - self.last_pose_stamp) / 1e9 <= self.config.absolute_prior_s:
+            # The last pose carried by the odometry (a turn on the spot, seconds of it),
+            # else by the constant velocity.
             prior = self._last_camera
+            base = self.predictor.by_odometry(frame.odom)
             v = self.predictor.velocity()
-            if v is not None:
+            if base is not None:
+                prior = compose_poses(base, self.index.camera_mount)
+            elif v is not None:
                 prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
         return absolute_solution(self.index, features, nearest, self.config, self.rng, prior)
 
@@ -262,6 +267,10 @@ class Localizer:
         for candidate in vote(features, self.index, self.config, allowed, nearest):
             found = verify(features, self.index.regions[candidate.region], self.index,
                            self.config, self.rng)
+            if found is not None and self.config.absolute_min_inliers > 0 and \
+                    refine_on_points(self.index, found.class_ids, found.uv, found.solution,
+                                     self.config, strict=True) is None:
+                found = None  # too few class points to confirm it, or they disagree
             if found is not None and (best is None or found.solution.inliers >
                                       best.solution.inliers):
                 best = found

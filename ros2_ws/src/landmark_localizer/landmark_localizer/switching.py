@@ -81,6 +81,20 @@ class MotionPredictor:
                 return d / dt
         return None
 
+    def by_odometry(self, odom: np.ndarray | None) -> np.ndarray | None:
+        """Return the base pose now: the last pose moved by the odometry since (or None).
+
+        Exact for any motion the odometry measures, over seconds, where the constant
+        velocity of :meth:`velocity` drifts; None without an odometry pose now or at the
+        last pose.
+        """
+        if odom is None or not np.all(np.isfinite(odom)) or not self.poses or not self.odom:
+            return None
+        (t_pose, pose), (t_odom, then) = self.poses[-1], self.odom[-1]
+        if t_pose != t_odom:
+            return None
+        return compose_poses(pose, compose_poses(invert_pose(then), np.asarray(odom, float)))
+
     def predict(self, pose: np.ndarray, horizon_s: float) -> np.ndarray:
         """Return the base pose ``horizon_s`` ahead (the pose itself without a velocity)."""
         v = self.velocity()
