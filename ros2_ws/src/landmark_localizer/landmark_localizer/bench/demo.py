@@ -112,7 +112,7 @@ def evaluate_demo(out: Path, recorded: Path, db: Path, run_bag: Path, scene: str
         checks = check_run(evaluation, Thresholds(**LENS_TARGETS), switching=False)
         acc = evaluation.evo or evaluation.accuracy
         largest = acc.translation_max_m if acc else math.nan
-        checks.append(Check('largest error', largest, LENS_MAX_ERROR_M, True,
+        checks.append(Check('largest translation error', largest, LENS_MAX_ERROR_M, True,
                             f'{largest * 100:.1f} cm'))
         print(format_checks(checks, "against the real-cameras issue's targets:"))
     else:
