@@ -34,3 +34,21 @@ def test_room_targets_pass_and_floor_accuracy_is_reported_not_judged() -> None:
     runs['floor_run']['latency']['tracking_p95'] = 0.012  # the floor's latency is judged
     text, passed = report(runs)
     assert not passed and '| floor_run latency TRACKING p95, s | 0.012 | <= 0.01 | FAIL |' in text
+
+
+def test_lens_rooms_carry_the_real_cameras_targets() -> None:
+    pinhole = figures(0.96, 0.012, 0.07, 0.0115, 0.09)
+    pinhole['evo'].update(translation_max_m=0.3, heading_median_deg=0.3)
+    runs = {'room_run_pinhole': pinhole}
+    text, passed = report(runs)
+    assert passed, text
+    assert '| room_run_pinhole availability | 0.96 | >= 0.95 | PASS |' in text
+    assert '| room_run_pinhole largest translation error, m | 0.3 | <= 0.5 | PASS |' in text
+    assert '| room_run_pinhole latency TRACKING p95, s | 0.0115 | <= 0.012 | PASS |' in text
+    fisheye = figures(0.87, 0.006, 0.038, 0.02, 0.09)     # fisheye: no latency target
+    fisheye['evo'].update(translation_max_m=0.6)
+    text, passed = report({'room_run_fisheye': fisheye})
+    assert not passed
+    assert '| room_run_fisheye availability | 0.87 | >= 0.95 | FAIL |' in text
+    assert '| room_run_fisheye largest translation error, m | 0.6 | <= 0.5 | FAIL |' in text
+    assert 'room_run_fisheye latency' not in text

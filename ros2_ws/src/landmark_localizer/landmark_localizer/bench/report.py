@@ -11,7 +11,10 @@ import math
 from pathlib import Path
 from typing import Any
 
-__all__ = ['report']
+__all__ = ['LENS_TRACKING_P95_S', 'report']
+
+#: The real-cameras issue's TRACKING latency target for a pinhole camera, one core.
+LENS_TRACKING_P95_S = 0.012
 
 
 def _get(fig: dict[str, Any], *path: str) -> float:
@@ -109,6 +112,27 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
             target(f'{name} availability', fig['availability'], t.availability, False)
             target(f'{name} region changes by prediction',
                    _get(fig, 'changes', 'predicted_fraction'), t.predicted_fraction, False)
+    for camera in ('pinhole', 'fisheye'):
+        fig = runs.get(f'room_run_{camera}')
+        if not fig:
+            continue
+        from landmark_localizer.bench.demo import LENS_MAX_ERROR_M, LENS_TARGETS
+
+        name = f'room_run_{camera}'
+        acc = _accuracy(fig) or {}
+        for key, label in (('translation_median_m', 'translation median (evo), m'),
+                           ('translation_p95_m', 'translation p95 (evo), m'),
+                           ('heading_median_deg', 'heading median, deg')):
+            target(f'{name} {label}', acc.get(key, math.nan), LENS_TARGETS[key])
+        target(f'{name} largest translation error, m', acc.get('translation_max_m', math.nan),
+               LENS_MAX_ERROR_M)
+        target(f'{name} availability', fig['availability'], LENS_TARGETS['availability'],
+               False)
+        if camera == 'pinhole':
+            target(f'{name} latency TRACKING p95, s', _get(fig, 'latency', 'tracking_p95'),
+                   LENS_TRACKING_P95_S)
+            target(f'{name} CPU time TRACKING p95, s',
+                   _get(fig, 'cpu_latency', 'tracking_p95'), LENS_TRACKING_P95_S)
     floor = runs.get('floor_run')
     if floor:
         target('floor_run latency TRACKING p95, s', _get(floor, 'latency', 'tracking_p95'),

@@ -47,7 +47,7 @@ from typing import Any
 
 from vbn_common import names
 
-__all__ = ['register', 'run']
+__all__ = ['LENS_BAGS', 'LENS_HEADINGS', 'lens_render_argv', 'register', 'run']
 
 #: Builder settings of the demo's database beyond the builder's defaults (none: the
 #: defaults cover the room; ``--build-set`` adds some).
@@ -225,6 +225,18 @@ def run(args: argparse.Namespace) -> int:
     return 0 if passed else 1
 
 
+def lens_render_argv(camera: str, kind: str) -> list[str]:
+    """Return ``vbn render``'s arguments (without ``--out``) of a lens room's bag.
+
+    Args:
+        camera: ``pinhole`` or ``fisheye`` (:data:`LENS_BAGS`).
+        kind: ``exploration`` (:data:`LENS_HEADINGS` headings per position) or ``run``.
+    """
+    extra = ['--kind', 'exploration', '--headings', str(LENS_HEADINGS)] \
+        if kind == 'exploration' else ['--kind', kind]
+    return ['render', '--scene', 'room', *extra, *LENS_BAGS[camera], '--compressed']
+
+
 def _bags(args: argparse.Namespace, out: Path, env: dict[str, str]) -> None:
     """Fill in the exploration and run bags, rendering a lens camera's into OUT."""
     from landmark_localizer.errors import LocalizerError
@@ -233,10 +245,7 @@ def _bags(args: argparse.Namespace, out: Path, env: dict[str, str]) -> None:
         args.exploration = args.exploration or 'bags/room_exploration'
         args.run = args.run or 'bags/room_run'
         return
-    lens = LENS_BAGS[args.camera]
-    wanted = (('exploration', ('--kind', 'exploration', '--headings', str(LENS_HEADINGS))),
-              ('run', ('--kind', 'run')))
-    for kind, extra in wanted:
+    for kind in ('exploration', 'run'):
         if getattr(args, kind):
             continue
         bag = out / f'room_{kind}_{args.camera}'
@@ -246,8 +255,7 @@ def _bags(args: argparse.Namespace, out: Path, env: dict[str, str]) -> None:
         if bag.exists():
             shutil.rmtree(bag)  # a render that did not finish
         t = _step(f'0/5 render {bag} ({args.camera})')
-        argv = _vbn() + ['render', '--scene', 'room', *extra, *lens, '--compressed',
-                         '--out', str(bag)]
+        argv = _vbn() + lens_render_argv(args.camera, kind) + ['--out', str(bag)]
         with (out / f'render_{kind}.log').open('w') as log:
             done = subprocess.run(argv, stdout=log, stderr=subprocess.STDOUT, env=env,
                                   check=False)
