@@ -171,10 +171,29 @@ def _tilt_rotation(pitch: float, roll: float) -> np.ndarray:
 
 def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(n, 3) observed ray (tilted by the state) minus the predicted direction."""
-    x, y, yaw, pitch, roll, dz = state
-    turned = rays @ _tilt_rotation(pitch, roll).T
-    shifted = points - np.array([0.0, 0.0, dz])
-    return turned - _predicted(np.array([[x, y, yaw]]), shifted)[0]
+    return _residuals_many(np.asarray(state, float)[None], rays, points)[0]
+
+
+def _residuals_many(states: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(m, n, 3) residuals of several states at once (a state and its probes: one pass).
+
+    The same as :func:`_tilt_rotation` and :func:`_predicted` per state, vectorised: the
+    refinement's cost is numpy's call overhead, not arithmetic.
+    """
+    x, y, yaw, pitch, roll, dz = states.T
+    cp, sp, cr, sr = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
+    # R = R_y(pitch) @ R_x(roll), rows written out.
+    rot = np.stack([np.stack([cp, sp * sr, sp * cr], 1),
+                    np.stack([np.zeros_like(cp), cr, -sr], 1),
+                    np.stack([-sp, cp * sr, cp * cr], 1)], 1)            # (m, 3, 3)
+    turned = np.einsum('mij,nj->mni', rot, rays)
+    dx = points[None, :, 0] - x[:, None]
+    dy = points[None, :, 1] - y[:, None]
+    dzp = points[None, :, 2] - dz[:, None]
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    v = np.stack([c * dx + s * dy, -s * dx + c * dy, dzp], axis=2)
+    v /= np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-12)
+    return turned - v
 
 
 def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
@@ -202,13 +221,13 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     prior_info = np.diag(np.where(prior[free] > 0, (sigma / np.maximum(prior[free], 1e-12)) ** 2,
                                   0.0))
     info = None
+    columns = np.flatnonzero(free)
+    probes = np.zeros((n_free, 6))
+    probes[np.arange(n_free), columns] = step[columns]
     for _ in range(iterations):
-        r = _residuals(state, rays, points)
-        jac = np.empty((len(rays) * 3, n_free))
-        for col, k in enumerate(np.flatnonzero(free)):
-            probe = state.copy()
-            probe[k] += step[k]
-            jac[:, col] = ((_residuals(probe, rays, points) - r) / step[k]).ravel()
+        both = _residuals_many(np.vstack([state, state + probes]), rays, points)
+        r = both[0]
+        jac = ((both[1:] - r) / step[columns][:, None, None]).reshape(n_free, -1).T
         norms = np.linalg.norm(r, axis=1)
         weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
         jw = jac * weights[:, None]
@@ -397,13 +416,14 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     state, _ = found
     turned = rays @ _tilt_rotation(state[3], state[4]).T
     shifted = points - np.array([0.0, 0.0, state[5]])
-    inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
+    first, inliers = inliers, _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
     if inliers.sum() < config.min_inliers or \
             _spread(rays[inliers]) < math.radians(config.absolute_min_spread_deg):
         return seed
-    found = refine_absolute(state[:3], rays[inliers], points[inliers], *args)
-    if found is None:
-        return seed
+    if not np.array_equal(first, inliers):  # the same points: already refined on them
+        found = refine_absolute(state[:3], rays[inliers], points[inliers], *args)
+        if found is None:
+            return seed
     state, cov = found
     residual = np.linalg.norm(_residuals(state, rays[inliers], points[inliers]), axis=1)
     rms = float(np.sqrt(np.mean(residual ** 2)))
