@@ -19,6 +19,7 @@ from landmark_db.database import (
     ModelView,
     RegionRecord,
     SampledPoses,
+    ScenePoints,
 )
 from landmark_db.decomposition import decompose
 from landmark_db.world import grid_world
@@ -75,7 +76,14 @@ def sample_database(rng: np.random.Generator, nx: int = 3, ny: int = 3, n_classe
                      {'gamma': 5, 'tau': 250.0, 'filters': ['min_poses', 'components'],
                       'seed': 0},
                      decomposition_seconds=decomposition.seconds)
-    return LandmarkDatabase(info, poses, classes, tuple(regions), decomposition.uncovered)
+    # Scene points: half of the classes, and as many of no class.
+    named = rng.permutation(n_classes)[:n_classes // 2]
+    ids = np.concatenate([named, np.full(named.size, -1)]).astype(np.int64)
+    points = ScenePoints(rng.uniform(-1, 4, (ids.size, 3)), ids,
+                         rng.integers(0, 256, (ids.size, 128), dtype=np.uint8),
+                         rng.integers(2, 30, ids.size))
+    return LandmarkDatabase(info, poses, classes, tuple(regions), decomposition.uncovered,
+                            points)
 
 
 def large_database(rng: np.random.Generator, view_features: int = 4000) -> LandmarkDatabase:

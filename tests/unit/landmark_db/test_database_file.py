@@ -51,7 +51,7 @@ def test_header_identifies_the_file(db_file):
     connection = sqlite3.connect(f'file:{db_file}?mode=ro', uri=True)
     assert connection.execute('PRAGMA application_id').fetchone()[0] == APPLICATION_ID
     assert connection.execute('PRAGMA user_version').fetchone()[0] == SCHEMA_VERSION
-    assert dict(connection.execute('SELECT key, value FROM meta'))['schema_version'] == '1'
+    assert dict(connection.execute('SELECT key, value FROM meta'))['schema_version'] == str(SCHEMA_VERSION)
     # The membership index answers "which regions does class c vote for" in SQL.
     plan = ' '.join(str(row) for row in connection.execute(
         'EXPLAIN QUERY PLAN SELECT region FROM region_features WHERE class_id = 3'))
@@ -342,3 +342,51 @@ def test_everything_is_written_in_one_transaction(tmp_path, monkeypatch):
     assert all(s.startswith('PRAGMA "main".page_count') for s in statements[commit + 1:])
     assert words.count('INSERT') > 10
     assert not any(w in ('SAVEPOINT', 'RELEASE', 'ROLLBACK') for w in words)
+
+
+def test_scene_points_round_trip_and_are_counted(db_file):
+    from database_samples import sample_database
+
+    points = sample_database(np.random.default_rng(0)).points
+    assert points.n_points == 12
+    opened = open_database(db_file)
+    assert opened.points == points
+    assert database_summary(db_file).counts['scene_points'] == 12
+    named = points.class_ids >= 0
+    table = opened.points.class_points(opened.n_classes)
+    np.testing.assert_array_equal(table[points.class_ids[named]], points.xyz[named])
+    assert np.isnan(table[np.setdiff1d(np.arange(opened.n_classes),
+                                       points.class_ids[named])]).all()
+
+
+def test_a_schema_1_file_opens_with_no_scene_points(tmp_path):
+    from dataclasses import replace
+
+    from database_samples import sample_database
+
+    from landmark_db.database import ScenePoints
+
+    source = tmp_path / 'new.db'
+    plain = replace(sample_database(np.random.default_rng(0)), points=ScenePoints.empty())
+    write_database(source, plain)
+    old = edited_copy(source, tmp_path / 'old.db', 'DROP TABLE scene_points',
+                      'PRAGMA user_version = 1',
+                      "UPDATE meta SET value = '1' WHERE key = 'schema_version'")
+    opened = open_database(old)
+    assert opened.points.n_points == 0 and opened == plain
+    assert 'scene_points' not in database_summary(old).counts
+    # A schema 2 file without the table is damaged.
+    lost = edited_copy(source, tmp_path / 'lost.db', 'DROP TABLE scene_points')
+    assert "table 'scene_points' is missing" in refused(lost)
+
+
+@pytest.mark.parametrize('statement, message', [
+    ('UPDATE scene_points SET x = x + 1e-9 WHERE id = 2', 'checksum'),
+    ("UPDATE scene_points SET descriptor = x'00' WHERE id = 0", 'descriptor is not 128'),
+    ('UPDATE scene_points SET class_id = 99 WHERE id = 0', 'out of range'),
+    ('UPDATE scene_points SET views = 1 WHERE id = 0', 'fewer than 2 views'),
+])
+def test_damaged_scene_points_are_refused(db_file, tmp_path, statement, message):
+    path = edited_copy(db_file, tmp_path / 'edited.db', statement)
+    text = refused_open_only(path)
+    assert 'damaged database' in text and message in text

@@ -76,6 +76,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         f"  service:     {_service(summary.get('service'))}",
         f"  model views: {counts['model_views']} with {counts['model_view_features']} "
         f'features',
+        '  scene points: ' + (f"{counts['scene_points']} (3-D points with a descriptor, for "
+                              'poses outside the regions)' if 'scene_points' in counts
+                              else 'none (schema 1)'),
         f"  camera:      {camera['kind']} {camera['width']} x {camera['height']}, "
         f"{camera['distortion_model'] or 'no'} distortion, frame {camera['frame_id']}",
         '  frames:      ' + ', '.join(f'{key} = {value}'

@@ -28,6 +28,7 @@ from landmark_db.database.model import (
     RegionRecord,
     SampledPoses,
 )
+from landmark_db.database.points import ScenePoints
 from landmark_db.database.schema import APPLICATION_ID, SCHEMA_VERSION
 from landmark_db.database.store import (
     DatabaseSummary,
@@ -52,6 +53,7 @@ __all__ = [
     'RegionAdjacency',
     'RegionRecord',
     'SampledPoses',
+    'ScenePoints',
     'database_image',
     'database_summary',
     'open_database',

@@ -31,7 +31,7 @@ kept for the matching symmetry check of Section 6.2.1; and :class:`BuildInfo` ca
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 import hashlib
 import json
@@ -57,6 +57,7 @@ from landmark_db.database.fields import (
     read_only,
     set_field,
 )
+from landmark_db.database.points import ScenePoints
 from landmark_db.decomposition import Decomposition, Region, Service, service
 from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance, adjacency_matrix
@@ -343,6 +344,7 @@ class LandmarkDatabase(ArrayEquality):
         regions: the regions, region ``r`` is ``regions[r]``.
         uncovered: ``(u,)`` int64 sorted k-coverable poses no region covers (the
             decomposition's ``uncovered``).
+        points: the scene points (:mod:`.points`; empty in a database built without).
 
     Derived (computed from the above, never stored twice): :attr:`membership`,
     :attr:`adjacency`, :meth:`to_world_instance`, :meth:`to_decomposition`.
@@ -357,6 +359,7 @@ class LandmarkDatabase(ArrayEquality):
     classes: FeatureClasses
     regions: tuple[RegionRecord, ...]
     uncovered: np.ndarray
+    points: ScenePoints = field(default_factory=ScenePoints.empty)
 
     def __post_init__(self) -> None:
         for name, kind in (('info', BuildInfo), ('poses', SampledPoses),
@@ -395,6 +398,10 @@ class LandmarkDatabase(ArrayEquality):
             raise LandmarkDbError('uncovered lists a pose twice')
         check_range(uncovered, n, 'uncovered', 'pose')
         set_field(self, 'uncovered', read_only(uncovered))
+        if not isinstance(self.points, ScenePoints):
+            raise LandmarkDbError(f'points must be ScenePoints, got '
+                                  f'{type(self.points).__name__}')
+        self.points.class_points(c)  # every named class in range
 
     @property
     def n_poses(self) -> int:
@@ -486,6 +493,10 @@ class LandmarkDatabase(ArrayEquality):
                 for array in (view.class_ids, view.keypoints, view.descriptors):
                     add(array)
         add(self.uncovered)
+        if self.points.n_points:  # (schema 1 files have none: their digests hold)
+            for array in (self.points.xyz, self.points.class_ids, self.points.descriptors,
+                          self.points.views):
+                add(array)
         return digest.hexdigest()
 
     def to_world_instance(self) -> WorldInstance:

@@ -1,4 +1,4 @@
-"""The SQLite schema of the landmark database, version 1.
+"""The SQLite schema of the landmark database, version 2.
 
 One SQLite file holds one :class:`~landmark_db.database.model.LandmarkDatabase`. The
 file identifies itself three ways: ``PRAGMA application_id`` (:data:`APPLICATION_ID`,
@@ -36,6 +36,10 @@ region_adjacency        ``region_a < region_b, shared_poses, joining_edges``: th
                         graph, stored for a fast start-up and checked against the
                         regions when the database is opened
 uncovered               ``pose``: k-coverable poses no region covers
+scene_points            ``id, class_id, views, x, y, z, descriptor``: the triangulated
+                        scene points (:mod:`.points`), class -1 for a point the filters
+                        did not keep, a 128-byte uint8 descriptor (schema 2; a schema 1
+                        file has none and is read with no point)
 ======================  ==================================================================
 
 A new column or table that old readers could ignore still bumps the version: readers
@@ -46,7 +50,7 @@ from __future__ import annotations
 __all__ = ['APPLICATION_ID', 'APPLICATION_NAME', 'REQUIRED_TABLES', 'SCHEMA_SQL',
            'SCHEMA_VERSION']
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 """The schema version this code writes and the newest it reads."""
 
 APPLICATION_ID = int.from_bytes(b'VBNL', 'big')
@@ -142,6 +146,15 @@ CREATE TABLE region_adjacency (
 CREATE TABLE uncovered (
     pose INTEGER PRIMARY KEY REFERENCES poses(id)
 );
+CREATE TABLE scene_points (
+    id INTEGER PRIMARY KEY,
+    class_id INTEGER NOT NULL,
+    views INTEGER NOT NULL,
+    x REAL NOT NULL,
+    y REAL NOT NULL,
+    z REAL NOT NULL,
+    descriptor BLOB NOT NULL
+);
 """
 
 REQUIRED_TABLES = (
@@ -149,3 +162,4 @@ REQUIRED_TABLES = (
     'visibility', 'regions', 'region_poses', 'region_features', 'model_views',
     'model_view_features', 'region_adjacency', 'uncovered',
 )
+"""Tables every version has; version 2 adds ``scene_points``."""

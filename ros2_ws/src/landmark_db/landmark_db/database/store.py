@@ -46,6 +46,7 @@ from landmark_db.database.model import (
     RegionRecord,
     SampledPoses,
 )
+from landmark_db.database.points import ScenePoints
 from landmark_db.database.schema import (
     APPLICATION_ID,
     APPLICATION_NAME,
@@ -131,6 +132,11 @@ def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
     _insert_poses(connection, db.poses)
     _insert_classes(connection, db.classes)
     _insert_regions(connection, db)
+    points = db.points
+    connection.executemany('INSERT INTO scene_points VALUES (?, ?, ?, ?, ?, ?, ?)', (
+        (i, int(c), int(v), float(p[0]), float(p[1]), float(p[2]), d.tobytes())
+        for i, (c, v, p, d) in enumerate(zip(points.class_ids.tolist(), points.views.tolist(),
+                                             points.xyz, points.descriptors))))
 
 
 def _insert_build_parameters(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
@@ -287,6 +293,8 @@ _COUNT_QUERIES = {
     'region_adjacency': 'SELECT COUNT(*) FROM region_adjacency',
     'uncovered': 'SELECT COUNT(*) FROM uncovered',
 }
+# Schema 2's table (counted when the file has it).
+_POINT_COUNT = 'SELECT COUNT(*) FROM scene_points'
 
 
 def database_summary(path: str | Path) -> DatabaseSummary:
@@ -302,6 +310,8 @@ def database_summary(path: str | Path) -> DatabaseSummary:
         try:
             counts = {name: int(connection.execute(sql).fetchone()[0])
                       for name, sql in _COUNT_QUERIES.items()}
+            if _has_table(connection, 'scene_points'):
+                counts['scene_points'] = int(connection.execute(_POINT_COUNT).fetchone()[0])
             build = {key: json.loads(value) for key, value in connection.execute(
                 'SELECT key, value FROM build_parameters ORDER BY key')}
             table_bytes = _table_bytes(connection)
@@ -398,7 +408,8 @@ def _check_file(connection: sqlite3.Connection, path: str | Path) -> None:
             raise LandmarkDbError(f'{path}: damaged database ({_shorten(detail)})')
         tables = {row[0] for row in connection.execute(
             "SELECT name FROM sqlite_master WHERE type = 'table'")}
-        missing = [name for name in REQUIRED_TABLES if name not in tables]
+        required = REQUIRED_TABLES + (('scene_points',) if version >= 2 else ())
+        missing = [name for name in required if name not in tables]
         if missing:
             raise LandmarkDbError(f'{path}: damaged database: table {missing[0]!r} is '
                                   f'missing')
@@ -483,10 +494,32 @@ def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjac
 
     regions = _load_regions(connection)
     uncovered = _array(connection, 'SELECT pose FROM uncovered ORDER BY pose', np.int64, 1)
-    db = LandmarkDatabase(info, poses, classes, regions, uncovered[:, 0])
+    db = LandmarkDatabase(info, poses, classes, regions, uncovered[:, 0],
+                          _load_points(connection))
     stored = _array(connection, 'SELECT region_a, region_b, shared_poses, joining_edges '
                     'FROM region_adjacency ORDER BY region_a, region_b', np.int64, 4)
     return db, RegionAdjacency(stored[:, :2], stored[:, 2], stored[:, 3])
+
+
+def _has_table(connection: sqlite3.Connection, name: str) -> bool:
+    return connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
+                              'name = ?', (name,)).fetchone() is not None
+
+
+def _load_points(connection: sqlite3.Connection) -> ScenePoints:
+    """The scene points (none in a schema 1 file)."""
+    if not _has_table(connection, 'scene_points'):
+        return ScenePoints.empty()
+    ints = _array(connection, 'SELECT id, class_id, views FROM scene_points ORDER BY id',
+                  np.int64, 3)
+    _check_ids(ints[:, 0], 'scene_points')
+    xyz = _array(connection, 'SELECT x, y, z FROM scene_points ORDER BY id', np.float64, 3)
+    blobs = [row[0] for row in connection.execute(
+        'SELECT descriptor FROM scene_points ORDER BY id')]
+    if any(len(blob) != DESCRIPTOR_SIZE for blob in blobs):
+        raise LandmarkDbError(f'a scene point descriptor is not {DESCRIPTOR_SIZE} bytes')
+    descriptors = np.frombuffer(b''.join(blobs), dtype=np.uint8).reshape(-1, DESCRIPTOR_SIZE)
+    return ScenePoints(xyz, ints[:, 1], descriptors, ints[:, 2])
 
 
 def _load_regions(connection: sqlite3.Connection) -> tuple[RegionRecord, ...]:

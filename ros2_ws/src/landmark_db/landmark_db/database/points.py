@@ -1,0 +1,95 @@
+"""The scene points of a landmark database: a sparse 3-D map beside the regions (issue 15).
+
+The thesis localizes only inside a region (Sections 7.4, 7.5), and a region needs k
+features visible from every pose of a neighbourhood. A camera that does not see all
+around (a pinhole turned towards a near wall) has parts of its pose space where no such
+k exist, yet the exploration saw plenty there: features visible from a few poses only,
+which the filters of Section 6.2.2 rightly keep out of the decomposition. The builder
+knows where each exploration image was taken, so every correspondence class whose
+member rays meet (the geometric check of ``visibility_builder.verification``) has a
+scene point. :class:`ScenePoints` keeps them, one descriptor each, so the localizer can
+compute a pose from 2D-3D matches where no region serves, and use the exact points of
+its region features (triangulated over every image that saw them, not just the model
+views) to check and polish its two-view poses.
+
+Coordinates: ``(x, y)`` in ``map``, ``z`` from the exploration camera's height (the
+convention of the verification and of the localizer's rays). ``class_ids`` names the
+database class of a point, or -1 for a point the filters did not keep.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from landmark_db.database.fields import (
+    ArrayEquality,
+    descriptor_array,
+    float_array,
+    int_array,
+    set_field,
+)
+from landmark_db.errors import LandmarkDbError
+
+__all__ = ['ScenePoints']
+
+
+@dataclass(frozen=True, eq=False)
+class ScenePoints(ArrayEquality):
+    """Triangulated scene points, each with one descriptor.
+
+    Attributes:
+        xyz: ``(n, 3)`` float64 points (``z`` from the camera height), metres.
+        class_ids: ``(n,)`` int64 database class of each point, -1 for none; a class
+            has at most one point.
+        descriptors: ``(n, 128)`` uint8 SIFT descriptor of each point (its member
+            nearest the members' mean).
+        views: ``(n,)`` int64 exploration images that saw the point (at least 2).
+    """
+
+    xyz: np.ndarray
+    class_ids: np.ndarray
+    descriptors: np.ndarray
+    views: np.ndarray
+
+    def __post_init__(self) -> None:
+        xyz = float_array(self.xyz, 'scene points', (None, 3))
+        n = len(xyz)
+        class_ids = int_array(self.class_ids, 'scene point classes', (n,))
+        descriptors = descriptor_array(self.descriptors, 'scene point descriptors')
+        views = int_array(self.views, 'scene point views', (n,))
+        if len(descriptors) != n:
+            raise LandmarkDbError(f'{len(descriptors)} scene point descriptors for {n} points')
+        if class_ids.size and class_ids.min() < -1:
+            raise LandmarkDbError(f'scene point class {int(class_ids.min())} is not a class '
+                                  f'or -1')
+        named = class_ids[class_ids >= 0]
+        if np.unique(named).size != named.size:
+            raise LandmarkDbError('a class has two scene points')
+        if views.size and views.min() < 2:
+            raise LandmarkDbError('a scene point is seen by fewer than 2 views')
+        for name, value in (('xyz', xyz), ('class_ids', class_ids),
+                            ('descriptors', descriptors), ('views', views)):
+            set_field(self, name, value)
+
+    @property
+    def n_points(self) -> int:
+        """Number of points."""
+        return int(len(self.xyz))
+
+    @classmethod
+    def empty(cls) -> ScenePoints:
+        """No point (a database built without them)."""
+        return cls(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros((0, 128), np.uint8),
+                   np.zeros(0, np.int64))
+
+    def class_points(self, n_classes: int) -> np.ndarray:
+        """``(n_classes, 3)`` the point of each class, NaN where it has none."""
+        out = np.full((n_classes, 3), np.nan)
+        named = self.class_ids >= 0
+        ids = self.class_ids[named]
+        if ids.size and ids.max() >= n_classes:
+            raise LandmarkDbError(f'scene point class {int(ids.max())} out of range '
+                                  f'(there are {n_classes} classes)')
+        out[ids] = self.xyz[named]
+        return out
