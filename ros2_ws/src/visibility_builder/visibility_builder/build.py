@@ -11,6 +11,7 @@ features             SIFT per image, in parallel (8.3.2)          :mod:`.feature
 classes              correspondence classes, Algorithm 6.3        :mod:`.classes`
 verify               one scene point per class (rays meet)        :mod:`.verification`
 filter               retain good features (6.2.2, 8.3.2)          :mod:`.filters`
+points               scene points of the verified classes         :mod:`.scene_points`
 decompose            rho-MORDP regions (Chapter 5)                :mod:`landmark_db.decomposition`
 model views          two or three views, extra features (7.2)     :mod:`.model_views`
 database             one SQLite file, atomic                      :mod:`landmark_db.database`
@@ -64,6 +65,7 @@ from visibility_builder.model_views import (
     select_model_views,
 )
 from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
+from visibility_builder.scene_points import PointsConfig, labels_by_image, scene_points
 from visibility_builder.verification import VerifyConfig, verify_classes
 
 __all__ = ['BuildConfig', 'BuildReport', 'BuildResult', 'DecompositionConfig', 'build',
@@ -116,6 +118,7 @@ class BuildConfig:
         filters: Section 6.2.2 filters.
         decomposition: Algorithm, k, rho, sigma.
         model_views: Views and extra features per region.
+        points: The scene points kept beside the regions.
         descriptors_per_class: Representative descriptors kept per class.
         workers: Processes for SIFT and matching (None: every core).
     """
@@ -128,6 +131,7 @@ class BuildConfig:
     filters: FilterConfig = field(default_factory=FilterConfig)
     decomposition: DecompositionConfig = field(default_factory=DecompositionConfig)
     model_views: ModelViewConfig = field(default_factory=ModelViewConfig)
+    points: PointsConfig = field(default_factory=PointsConfig)
     descriptors_per_class: int = 4
     workers: int | None = None
 
@@ -145,7 +149,7 @@ class BuildConfig:
 
 
 _SECTIONS = ('read', 'sampling', 'sift', 'classes', 'verify', 'filters', 'decomposition',
-             'model_views')
+             'model_views', 'points')
 
 
 def flat_config(config: BuildConfig) -> dict[str, Any]:
@@ -437,6 +441,13 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
             'no feature class survived the filters (try a lower filters.min_poses or '
             'filters.min_block)')
 
+    stages.begin('points')
+    points = scene_points(
+        labels_by_image(sampling.frames_of_pose, classes.labels, [len(f) for f in features]),
+        features, np.array([f.camera_pose for f in frames], float),
+        exploration.camera_model(), kept, config.points)
+    stages.end(points=points.n_points, of_kept_classes=int((points.class_ids >= 0).sum()))
+
     stages.begin('decompose', f'{config.decomposition.algorithm}, k={config.decomposition.k}')
     spacing = sampling.spacing
     world = WorldInstance.from_visibility(sampling.world_poses(), sampling.edges, visibility,
@@ -466,8 +477,9 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
             f'rho={dc.rho} neighbourhood (lower --k or --rho)')
 
     stages.begin('model_views')
-    database = _assemble(exploration, sampling, features, classes.labels, kept, visibility,
-                         decomposition, world, config, source or str(exploration.path))
+    database = replace(_assemble(exploration, sampling, features, classes.labels, kept,
+                                 visibility, decomposition, world, config,
+                                 source or str(exploration.path)), points=points)
     final = database.service(world)
     stages.end(regions=database.n_regions,
                regions_without_view=len(decomposition.regions) - database.n_regions,
@@ -504,16 +516,11 @@ def _assemble(exploration: Exploration, sampling: PoseSampling,
         (int(lab.max(initial=-1)) for lab in pose_labels), default=-1))), -1, np.int64)
     remap[kept] = np.arange(kept.size)
     image_pose = np.empty(n_images, np.int64)
-    image_labels: list[np.ndarray] = [np.zeros(0, np.int64)] * n_images
     for pose, members in enumerate(sampling.frames_of_pose):
-        labels = np.asarray(pose_labels[pose], np.int64)
-        start = 0
-        for i in members:
-            image_pose[i] = pose
-            n = len(features[i])
-            part = labels[start:start + n]
-            image_labels[i] = np.where(part >= 0, remap[np.maximum(part, 0)], -1)
-            start += n
+        image_pose[list(members)] = pose
+    image_labels = [np.where(part >= 0, remap[np.maximum(part, 0)], -1) for part in
+                    labels_by_image(sampling.frames_of_pose, pose_labels,
+                                    [len(f) for f in features])]
     camera = np.array([f.camera_pose for f in frames], float)
     table = ImageTable(pose=image_pose, stamp_ns=np.array([f.stamp_ns for f in frames]),
                        camera_xy=camera[:, :2], camera_yaw=camera[:, 2], features=features,

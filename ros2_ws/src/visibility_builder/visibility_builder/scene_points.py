@@ -1,0 +1,187 @@
+"""The scene points of the database: each verified class triangulated from all its images.
+
+Not in the thesis; a departure with a reason (issue 15). A camera that does not see all
+around has places (facing a near wall) where no k features are visible from a whole
+neighbourhood, so the decomposition leaves them without a region, and the localizer
+had only the points it could triangulate from the regions' two or three model views.
+The exploration saw those places from a few poses, and the geometric check of
+:mod:`.verification` has already shown that each class's member rays meet in one
+point. This step keeps those points, with one descriptor each, as
+:class:`~landmark_db.database.points.ScenePoints`:
+
+1. every member of a class gives a ray from its camera centre (``(x, y)`` of the image,
+   at the camera height) through its keypoint, levelled by the mount;
+2. the least-squares point of the rays (one 3 x 3 solve per class, batched);
+3. a class gives a point when at least ``min_views`` images see it, its rays span at
+   least ``min_angle_deg`` (parallel rays fix no depth), the point lies in front of
+   every member at most ``max_distance_m`` away, and every member reprojects within
+   ``max_error_px`` (the verification's tolerance is per keypoint size; this one keeps
+   only points sharp enough to pose a camera by);
+4. its descriptor is the member nearest the members' mean.
+
+A class the filters kept carries its database id; the others -1. Cost: linear in the
+classified features (one pass of numpy; about 0.1 s for the room's 60k members).
+"""
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from landmark_db.database.points import ScenePoints
+from vbn_common.features import ImageFeatures
+from vbn_common.geometry.camera import CameraModel
+from visibility_builder.errors import VisibilityBuilderError
+
+__all__ = ['PointsConfig', 'labels_by_image', 'scene_points']
+
+
+@dataclass(frozen=True)
+class PointsConfig:
+    """Which verified classes become scene points.
+
+    Attributes:
+        enabled: keep scene points (False: the database holds none).
+        min_views: least exploration images that see the point.
+        min_angle_deg: least angle between two of its rays, degrees.
+        max_distance_m: farthest the point lies from a camera that sees it, metres.
+        max_error_px: largest reprojection error of a member, pixels.
+    """
+
+    enabled: bool = True
+    min_views: int = 3
+    min_angle_deg: float = 2.0
+    max_distance_m: float = 30.0
+    max_error_px: float = 1.5
+
+    def __post_init__(self) -> None:
+        if isinstance(self.min_views, bool) or int(self.min_views) != self.min_views or \
+                self.min_views < 2:
+            raise VisibilityBuilderError(f'points.min_views must be an integer >= 2, '
+                                         f'got {self.min_views!r}')
+        for name in ('min_angle_deg', 'max_distance_m', 'max_error_px'):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise VisibilityBuilderError(f'points.{name} must be a positive number, '
+                                             f'got {value!r}')
+
+
+def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFeatures],
+                 camera_poses: np.ndarray, camera: CameraModel, kept: np.ndarray,
+                 config: PointsConfig = PointsConfig()) -> ScenePoints:
+    """Triangulate the verified classes into scene points.
+
+    Args:
+        image_labels: per image, ``(n_i,)`` the verified class of each feature (-1: none),
+            before the filters' renumbering.
+        features: per image, its SIFT features (keypoints levelled to the mount).
+        camera_poses: ``(n_images, 3)`` camera ``(x, y, heading)`` in ``map``.
+        camera: the camera as mounted (its rays levelled).
+        kept: ``(c,)`` the classes the filters kept: class ``kept[j]`` is database class j.
+        config: the thresholds.
+
+    Returns:
+        The points, sorted by class.
+    """
+    if not config.enabled:
+        return ScenePoints.empty()
+    labels = np.concatenate([np.asarray(lab, np.int64) for lab in image_labels]) \
+        if len(image_labels) else np.zeros(0, np.int64)
+    image = np.repeat(np.arange(len(image_labels)), [len(lab) for lab in image_labels])
+    member = np.flatnonzero(labels >= 0)
+    if member.size == 0:
+        return ScenePoints.empty()
+    uv = np.concatenate([f.keypoints for f in features]).astype(float)[member]
+    descriptors = np.concatenate([f.descriptors for f in features])[member]
+    labels, image = labels[member], image[member]
+    pose = np.asarray(camera_poses, float)[image]
+    rays = _map_rays(camera.unproject(uv), pose[:, 2])
+    centres = np.column_stack([pose[:, :2], np.zeros(len(pose))])
+
+    ids, inverse = np.unique(labels, return_inverse=True)
+    n = len(ids)
+    proj = np.eye(3)[None] - rays[:, :, None] * rays[:, None, :]
+    a = np.zeros((n, 3, 3))
+    b = np.zeros((n, 3))
+    np.add.at(a, inverse, proj)
+    np.add.at(b, inverse, np.einsum('nij,nj->ni', proj, centres))
+    views = np.bincount(inverse, minlength=n)
+    ok = views >= config.min_views
+    points = np.full((n, 3), np.nan)
+    if ok.any():
+        points[ok] = np.linalg.solve(a[ok] + 1e-9 * np.eye(3), b[ok][:, :, None])[:, :, 0]
+    # Spread: the largest angle of a member's ray from the class's mean ray.
+    mean = np.zeros((n, 3))
+    np.add.at(mean, inverse, rays)
+    mean /= np.maximum(np.linalg.norm(mean, axis=1, keepdims=True), 1e-12)
+    off = np.arccos(np.clip(np.einsum('ij,ij->i', rays, mean[inverse]), -1, 1))
+    spread = np.zeros(n)
+    np.maximum.at(spread, inverse, off)
+    ok &= 2 * spread >= math.radians(config.min_angle_deg)
+    # In front, not too far, and sharp in every member.
+    to_point = points[inverse] - centres
+    depth = np.einsum('ij,ij->i', to_point, rays)
+    distance = np.linalg.norm(to_point, axis=1)
+    error = _reprojection_error(points[inverse], pose, uv, camera)
+    bad = ~np.isfinite(depth) | (depth <= 0) | (distance > config.max_distance_m) | \
+        ~(error <= config.max_error_px)
+    ok &= np.bincount(inverse, weights=bad, minlength=n) == 0
+
+    # One descriptor: the member nearest the class's mean descriptor.
+    dsum = np.zeros((n, descriptors.shape[1]))
+    np.add.at(dsum, inverse, descriptors.astype(float))
+    centre = dsum / np.maximum(views, 1)[:, None]
+    dist = np.linalg.norm(descriptors - centre[inverse], axis=1)
+    order = np.lexsort((dist, inverse))
+    first = order[np.concatenate([[True], np.diff(inverse[order]) != 0])]
+    chosen = np.full(n, -1)
+    chosen[inverse[first]] = first
+
+    remap = np.full(int(max(ids.max(), kept.max(initial=-1))) + 1, -1, np.int64)
+    remap[np.asarray(kept, np.int64)] = np.arange(len(kept))
+    keep = np.flatnonzero(ok)
+    return ScenePoints(points[keep], remap[ids[keep]], descriptors[chosen[keep]],
+                       views[keep])
+
+
+def labels_by_image(frames_of_pose: Sequence[Sequence[int]], pose_labels: Sequence[np.ndarray],
+                    n_features: Sequence[int]) -> list[np.ndarray]:
+    """Split each pose's labels (its images' features concatenated) into its images'."""
+    out: list[np.ndarray] = [np.zeros(0, np.int64)] * len(n_features)
+    for members, labels in zip(frames_of_pose, pose_labels, strict=True):
+        start = 0
+        for i in members:
+            out[i] = np.asarray(labels[start:start + n_features[i]], np.int64)
+            start += n_features[i]
+    return out
+
+
+def _map_rays(optical: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """(n, 3) ``map`` rays (z up) of levelled optical rays (x right, y down, z forward)."""
+    c, s = np.cos(heading), np.sin(heading)
+    forward, left, up = optical[:, 2], -optical[:, 0], -optical[:, 1]
+    return np.column_stack([c * forward - s * left, s * forward + c * left, up])
+
+
+def _reprojection_error(points: np.ndarray, pose: np.ndarray, uv: np.ndarray,
+                        camera: CameraModel) -> np.ndarray:
+    """Pixel distance between each member's keypoint and its point's projection."""
+    dx = points[:, 0] - pose[:, 0]
+    dy = points[:, 1] - pose[:, 1]
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    forward = c * dx + s * dy
+    left = -s * dx + c * dy
+    local = np.column_stack([-left, -points[:, 2], forward])
+    finite = np.all(np.isfinite(local), axis=1)
+    error = np.full(len(points), np.inf)
+    if finite.any():
+        proj, valid = camera.project(local[finite])
+        du = np.abs(proj[:, 0] - uv[finite, 0])
+        if camera.kind == 'panoramic':
+            du = np.minimum(du, camera.width - du)
+        e = np.hypot(du, proj[:, 1] - uv[finite, 1])
+        e[~valid] = np.inf
+        error[finite] = e
+    return error
