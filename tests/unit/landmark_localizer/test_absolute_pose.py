@@ -210,3 +210,75 @@ def test_the_odometry_carries_the_last_pose_through_a_turn_on_the_spot() -> None
     assert predictor.by_odometry(None) is None
     predictor.add(10**8, np.array([2.0, 1.5, 3.0]), None)         # a pose without odometry
     assert predictor.by_odometry(np.array([10.5, 5.0, 0.0])) is None
+
+
+def test_two_poses_that_fit_as_well_are_ambiguous_and_the_stronger_one_wins() -> None:
+    rng = np.random.default_rng(9)
+    a, b = _points(rng, 40), _points(rng, 40)
+    pose_a, pose_b = np.array([2.0, 1.5, 0.3]), np.array([3.5, 2.5, 0.3])  # 1.8 m apart
+    kwargs = dict(threshold=THRESHOLD, sigma=SIGMA, min_inliers=10, min_spread=0.3)
+    # Half the matches fit one pose, half the other, as well: no pose.
+    rays = np.vstack([_rays(a, pose_a), _rays(b, pose_b)])
+    assert solve_absolute(rays, np.vstack([a, b]), np.random.default_rng(0), **kwargs) is None
+    # 40 against 12: the 40.
+    rays = np.vstack([_rays(a, pose_a), _rays(b[:12], pose_b)])
+    found = solve_absolute(rays, np.vstack([a, b[:12]]), np.random.default_rng(0), **kwargs)
+    assert found is not None and np.hypot(*(found.pose[:2] - pose_a[:2])) < 1e-6
+    assert found.n_inliers == 40
+
+
+def test_a_few_inliers_among_many_matches_are_still_found() -> None:
+    # 20 right among 100 (a sample of three inliers 1 in 125): the adaptive batches.
+    rng = np.random.default_rng(10)
+    points = _points(rng, 100)
+    truth = np.array([2.5, 2.0, -1.0])
+    rays = _rays(rng.permutation(points), truth)
+    rays[:20] = _rays(points[:20], truth)
+    found = solve_absolute(rays, points, np.random.default_rng(0), threshold=THRESHOLD,
+                           sigma=SIGMA, min_inliers=15, min_spread=0.3)
+    # (a wrong match that falls within the threshold by chance pulls a little)
+    assert found is not None and np.hypot(*(found.pose[:2] - truth[:2])) < 1e-3
+    assert found.inliers[:20].all()
+
+
+def test_absolute_solution_matches_the_scene_points_of_dropped_classes() -> None:
+    from dataclasses import replace
+
+    from localizer_samples import HEIGHT, synthetic_database, wall_points
+
+    from landmark_db.database import ScenePoints
+    from landmark_localizer.absolute_pose import absolute_solution
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.index import DatabaseIndex
+
+    rng = np.random.default_rng(11)
+    classes = wall_points(rng, 20)
+    database = synthetic_database(rng, classes)
+    # 60 points of no class (the filters dropped them) and the 20 classes' own.
+    extra = wall_points(rng, 60)
+    xyz = np.vstack([classes, extra])
+    descriptors = rng.integers(0, 256, (80, 128)).astype(np.uint8)
+    ids = np.r_[np.arange(20), np.full(60, -1)]
+    relative = xyz - [0.0, 0.0, HEIGHT]        # scene points: z from the camera height
+    index = DatabaseIndex(replace(database, points=ScenePoints(relative, ids, descriptors,
+                                                               np.full(80, 3))))
+    truth = np.array([2.3, 1.2, 0.9])
+    _, _, seen, uv = _frame(xyz, truth, np.random.default_rng(12))
+    from vbn_common.features import ImageFeatures
+
+    n = len(seen)
+    features = ImageFeatures(keypoints=uv.astype(np.float32), sizes=np.ones(n, np.float32),
+                             angles=np.zeros(n, np.float32), responses=np.ones(n, np.float32),
+                             descriptors=descriptors[seen].astype(np.float32))
+    scene = index.nearest_scene_points(features.descriptors)
+    np.testing.assert_array_equal(scene[0], seen)           # each descriptor its own point
+    no_classes = (np.full(n, -1), np.full(n, np.inf), np.full(n, np.inf))
+    config = LocalizerConfig()
+    assert absolute_solution(index, features, no_classes, config,
+                             np.random.default_rng(0)) is None
+    found = absolute_solution(index, features, no_classes, config, np.random.default_rng(0),
+                              scene=scene)
+    assert found is not None and np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
+    # Its classes: those of the inlier points that have one.
+    assert set(found.inlier_classes.tolist()) <= set(range(20))
+    assert found.inliers > len(found.inlier_classes)

@@ -46,8 +46,19 @@ from vbn_common.geometry.localize import PoseEstimate
 #: Least tracked features with a point to judge a two-view pose by (polishing it takes
 #: ``min_inliers``).
 JUDGE_POINTS = 5
+#: RANSAC: the probability of having drawn one sample of three inliers, and the most
+#: batches of samples drawn to reach it.
+CONFIDENCE = 0.999
+MAX_BATCHES = 4
+#: A hypothesis further than this from the winner (metres) with at least this share of
+#: its inliers makes the frame ambiguous: no pose.
+AMBIGUITY_DISTANCE_M = 0.3
+AMBIGUITY_RATIO = 0.8
+#: Hypotheses refined (the strongest, at least ``AMBIGUITY_DISTANCE_M`` apart).
+CANDIDATES = 3
 
-__all__ = ['JUDGE_POINTS', 'AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses',
+__all__ = ['AMBIGUITY_DISTANCE_M', 'AMBIGUITY_RATIO', 'CANDIDATES', 'CONFIDENCE', 'JUDGE_POINTS',
+           'MAX_BATCHES', 'AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses',
            'refine_absolute', 'refine_on_points', 'solve_absolute']
 
 
@@ -279,25 +290,50 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
     n = len(rays)
     if n < max(3, min_inliers):
         return None
-    samples = np.array([rng.choice(n, 3, replace=False) for _ in range(iterations)])
-    poses = hypotheses(rays, points, samples)
-    ok = np.all(np.isfinite(poses), axis=1)
-    if prior_pose is not None:
-        ok &= np.hypot(*(poses[:, :2] - prior_pose[:2]).T) <= max_distance
-    if not ok.any():
+    poses, counts = _sample(rays, points, rng, iterations, threshold, tilt_prior,
+                            height_prior, prior_pose, max_distance)
+    if counts.size == 0 or counts.max() < min_inliers:
         return None
-    poses = poses[ok]
-    coarse = _coarse_inliers(poses, rays, points, threshold, tilt_prior, height_prior)
-    best = poses[int(np.argmax(coarse.sum(axis=1)))]
-    inliers = _coarse_inliers(best[None], rays, points, threshold, tilt_prior, height_prior)[0]
+    # The strongest hypotheses, a few apart, each refined: the coarse count (elevation
+    # slack for the unknown tilt) can favour a wrong pose the refinement then shrinks.
+    tried: list[np.ndarray] = []
+    results: list[AbsolutePose] = []
+    for j in np.argsort(-counts, kind='stable'):
+        if len(tried) == CANDIDATES or counts[j] < min_inliers:
+            break
+        if any(np.hypot(*(poses[j, :2] - t[:2])) <= AMBIGUITY_DISTANCE_M for t in tried):
+            continue
+        tried.append(poses[j])
+        found = _finish(poses[j], rays, points, threshold, sigma, min_inliers, min_spread,
+                        tilt_prior, height_prior)
+        if found is not None and (prior_pose is None or np.hypot(
+                *(found.pose[:2] - prior_pose[:2])) <= max_distance):
+            results.append(found)
+    if not results:
+        return None
+    best = max(results, key=lambda r: r.n_inliers)
+    # Ambiguity: another pose, far from the best, that explains nearly as many matches
+    # (a repeated pattern, a second wall that fits) leaves the frame undecided.
+    for other in results:
+        if other is not best and other.n_inliers >= AMBIGUITY_RATIO * best.n_inliers and \
+                np.hypot(*(other.pose[:2] - best.pose[:2])) > AMBIGUITY_DISTANCE_M:
+            return None
+    return best
+
+
+def _finish(start: np.ndarray, rays: np.ndarray, points: np.ndarray, threshold: float,
+            sigma: float, min_inliers: int, min_spread: float, tilt_prior: float,
+            height_prior: float) -> AbsolutePose | None:
+    """Refine a hypothesis on its inliers, re-select them, refine again (or None)."""
+    inliers = _coarse_inliers(start[None], rays, points, threshold, tilt_prior,
+                              height_prior)[0]
     if inliers.sum() < min_inliers:
         return None
-    found = refine_absolute(best, rays[inliers], points[inliers], threshold, sigma,
+    found = refine_absolute(start, rays[inliers], points[inliers], threshold, sigma,
                             tilt_prior, height_prior)
     if found is None:
         return None
     state, _ = found
-    # Re-select with the refined pose, then refine on the final inliers.
     turned = rays @ _tilt_rotation(state[3], state[4]).T
     shifted = points - np.array([0.0, 0.0, state[5]])
     inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
@@ -313,10 +349,47 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
     # The information is in units of one ray's variance (the priors whitened by sigma):
     # scaled by the residuals' own variance, floored at sigma.
     covariance = cov * max(rms, sigma) ** 2
-    if prior_pose is not None and np.hypot(*(state[:2] - prior_pose[:2])) > max_distance:
-        return None
     return AbsolutePose(state[:3].copy(), 0.5 * (covariance + covariance.T), inliers, rms,
                         state[3:].copy())
+
+
+def _sample(rays: np.ndarray, points: np.ndarray, rng: np.random.Generator, iterations: int,
+            threshold: float, tilt_prior: float, height_prior: float,
+            prior_pose: np.ndarray | None, max_distance: float
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """RANSAC hypotheses and their coarse inlier counts, ``((h, 3), (h,))``.
+
+    Batches of ``iterations`` triples until a sample of three inliers was drawn with
+    probability :data:`CONFIDENCE` at the best inlier ratio seen (adaptive termination;
+    at most :data:`MAX_BATCHES` batches); the prior pose, if any, is a hypothesis too.
+    Hypotheses further than ``max_distance`` from the prior are left out.
+    """
+    n = len(rays)
+    poses_all, counts_all = [], []
+    if prior_pose is not None:
+        poses_all.append(np.asarray(prior_pose, float).reshape(1, 3))
+        counts_all.append(_coarse_inliers(poses_all[0], rays, points, threshold, tilt_prior,
+                                          height_prior).sum(axis=1))
+    drawn = 0
+    for _ in range(MAX_BATCHES):
+        samples = np.argsort(rng.random((iterations, n)), axis=1)[:, :3]
+        poses = hypotheses(rays, points, samples)
+        ok = np.all(np.isfinite(poses), axis=1)
+        if prior_pose is not None:
+            ok &= np.hypot(*(poses[:, :2] - prior_pose[:2]).T) <= max_distance
+        drawn += iterations
+        if ok.any():
+            poses_all.append(poses[ok])
+            counts_all.append(_coarse_inliers(poses[ok], rays, points, threshold, tilt_prior,
+                                              height_prior).sum(axis=1))
+        best = max((int(c.max()) for c in counts_all if c.size), default=0)
+        ratio = min(best / n, 1.0)
+        if ratio >= 1.0 or drawn * math.log1p(-ratio ** 3 + 1e-300) <= math.log(
+                1.0 - CONFIDENCE):
+            break
+    if not poses_all:
+        return np.zeros((0, 3)), np.zeros(0, int)
+    return np.concatenate(poses_all), np.concatenate(counts_all)
 
 
 def _spread(rays: np.ndarray) -> float:
@@ -331,27 +404,34 @@ def _spread(rays: np.ndarray) -> float:
 def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
                       nearest: tuple[np.ndarray, np.ndarray, np.ndarray],
                       config: LocalizerConfig, rng: np.random.Generator,
-                      prior_pose: np.ndarray | None = None) -> PoseSolution | None:
-    """Return the frame's camera pose from its matches to the class points, as a solve.
+                      prior_pose: np.ndarray | None = None,
+                      scene: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                      ) -> PoseSolution | None:
+    """Return the frame's camera pose from its matches to the 3-D points, as a solve.
 
     Args:
         index: The database index (points, the frame's camera).
         features: The frame's SIFT features (voting's).
-        nearest: ``index.nearest_classes`` of their descriptors.
+        nearest: ``index.nearest_classes`` of their descriptors (matches to the class
+            points, used when ``scene`` is None).
         config: ``absolute_*``, ``max_jump_m``, ``tilt_prior_deg``, ``height_prior_m``.
         rng: Random generator of the samples.
         prior_pose: (3,) the camera pose the motion predicts from a recent pose, if any.
+        scene: ``index.nearest_scene_points`` of the descriptors: the matches to the
+            database's scene points (those of dropped classes too).
 
     Returns:
         A :class:`~landmark_localizer.pose.PoseSolution` with no model view
-        (``views_used`` 0), or None.
+        (``views_used`` 0; its classes those of the inlier points that have one), or
+        None.
     """
     if config.absolute_min_inliers <= 0 or len(features) == 0:
         return None
-    best, d1, d_other = nearest
+    best, d1, d_other = nearest if scene is None else scene
+    xyz = index.points if scene is None else index.scene_xyz
     good = (best >= 0) & (d1 <= config.vote_max_distance) & \
         (d1 < config.absolute_ratio * d_other)
-    good &= np.all(np.isfinite(index.points[np.maximum(best, 0)]), axis=1)
+    good &= np.all(np.isfinite(xyz[np.maximum(best, 0)]), axis=1)
     rows = np.flatnonzero(good)
     if rows.size < config.absolute_min_inliers:
         return None
@@ -364,7 +444,7 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
     focal = pixels_per_radian(index.frame_camera)
     need = config.absolute_min_inliers * (1 if prior_pose is not None else 2)
     found = solve_absolute(
-        rays, index.points[classes], rng, threshold=config.absolute_threshold_px / focal,
+        rays, xyz[classes], rng, threshold=config.absolute_threshold_px / focal,
         sigma=0.5 / focal, min_inliers=need,
         min_spread=math.radians(config.absolute_min_spread_deg),
         tilt_prior=math.radians(config.tilt_prior_deg), height_prior=config.height_prior_m,
@@ -374,8 +454,11 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
     x, y, yaw = (float(v) for v in found.pose)
     estimate = PoseEstimate(x, y, yaw, found.covariance, _spread(rays[found.inliers]),
                             found.rms, 0, True)
-    return PoseSolution(estimate, np.sort(classes[found.inliers]), 0, found.n_inliers,
-                        found.rms * focal)
+    inlier = classes[found.inliers]
+    if scene is not None:
+        inlier = index.scene_class[inlier]
+        inlier = inlier[inlier >= 0]
+    return PoseSolution(estimate, np.sort(inlier), 0, found.n_inliers, found.rms * focal)
 
 
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,

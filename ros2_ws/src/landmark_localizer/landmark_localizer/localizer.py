@@ -140,6 +140,7 @@ class Localizer:
         self.hint: tuple[np.ndarray, float] | None = None
         self._failures = 0
         self._features = None  # this frame's voting features and their nearest classes
+        self._scene = None  # ... and their nearest scene points (a 1-tuple)
         self._last_camera: np.ndarray | None = None  # the last published camera pose
 
     # -- control --------------------------------------------------------------------------
@@ -192,7 +193,7 @@ class Localizer:
         self.last_stamp = frame.stamp_ns
         self.stats.frames += 1
         self.tracker.next_frame()
-        self._features = None
+        self._features = self._scene = None
         solution: PoseSolution | None = None
         tracked = 0
         if self.state == TRACKING:
@@ -244,14 +245,22 @@ class Localizer:
                 prior = compose_poses(base, self.index.camera_mount)
             elif v is not None:
                 prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
-        return absolute_solution(self.index, features, nearest, self.config, self.rng, prior)
+        return absolute_solution(self.index, features, nearest, self.config, self.rng, prior,
+                                 self._scene_matches(features))
+
+    def _scene_matches(self, features):  # noqa: ANN001, ANN202 - nearest scene points
+        """Return this frame's matches to the scene points (computed once), or None."""
+        if self._scene is None:
+            self._scene = (self.index.nearest_scene_points(features.descriptors,
+                                                           self.config.vote_checks),)
+        return self._scene[0]
 
     def _absolute_polish(self, image: np.ndarray, frame: Frame, solution: PoseSolution
                          ) -> PoseSolution:
         """Return the vote's solution with the absolute pose near it, when one is found."""
         features, nearest = self._vote_features(image)
         found = absolute_solution(self.index, features, nearest, self.config, self.rng,
-                                  solution.estimate.pose)
+                                  solution.estimate.pose, self._scene_matches(features))
         if found is None:
             return solution
         polished = replace(solution, estimate=found.estimate)
