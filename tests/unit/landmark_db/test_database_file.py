@@ -51,7 +51,8 @@ def test_header_identifies_the_file(db_file):
     connection = sqlite3.connect(f'file:{db_file}?mode=ro', uri=True)
     assert connection.execute('PRAGMA application_id').fetchone()[0] == APPLICATION_ID
     assert connection.execute('PRAGMA user_version').fetchone()[0] == SCHEMA_VERSION
-    assert dict(connection.execute('SELECT key, value FROM meta'))['schema_version'] == str(SCHEMA_VERSION)
+    meta = dict(connection.execute('SELECT key, value FROM meta'))
+    assert meta['schema_version'] == str(SCHEMA_VERSION)
     # The membership index answers "which regions does class c vote for" in SQL.
     plan = ' '.join(str(row) for row in connection.execute(
         'EXPLAIN QUERY PLAN SELECT region FROM region_features WHERE class_id = 3'))

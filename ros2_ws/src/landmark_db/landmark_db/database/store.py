@@ -507,7 +507,7 @@ def _has_table(connection: sqlite3.Connection, name: str) -> bool:
 
 
 def _load_points(connection: sqlite3.Connection) -> ScenePoints:
-    """The scene points (none in a schema 1 file)."""
+    """Read the scene points (none in a schema 1 file)."""
     if not _has_table(connection, 'scene_points'):
         return ScenePoints.empty()
     ints = _array(connection, 'SELECT id, class_id, views FROM scene_points ORDER BY id',
