@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 
-from landmark_localizer.absolute_pose import base_rays, hypotheses, solve_absolute
+from landmark_localizer.absolute_pose import base_rays, hypotheses, refine_absolute, solve_absolute
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from vbn_common.geometry.mount import tilt_matrix
 
@@ -282,3 +282,32 @@ def test_absolute_solution_matches_the_scene_points_of_dropped_classes() -> None
     # Its classes: those of the inlier points that have one.
     assert set(found.inlier_classes.tolist()) <= set(range(20))
     assert found.inliers > len(found.inlier_classes)
+
+
+def test_the_motion_prior_holds_a_pose_the_points_leave_loose() -> None:
+    """Exact rays give the truth with or without the prior; a patch of points on one
+    far wall leaves the range loose, and the prior then holds it near the prediction."""
+    rng = np.random.default_rng(6)
+    points = _points(rng, 40)
+    truth = np.array([3.0, 2.0, 0.4])
+    args = (THRESHOLD, SIGMA, 0.0, 0.0)
+    prior = (truth + np.array([0.01, -0.01, 0.002]), np.array([0.02, 0.02, 0.02]))
+    exact = refine_absolute(truth + np.array([0.05, 0.05, 0.01]), _rays(points, truth),
+                            points, *args, motion_prior=prior)
+    assert exact is not None
+    np.testing.assert_allclose(exact[0][:3], truth, atol=1e-4)  # 40 exact rays outweigh it
+    # Four points close together on the wall x = 6 with 2 px of noise: without the prior
+    # the range along x wanders; with a 1 cm prior at the truth it stays within 2 cm.
+    wall = np.column_stack([np.full(4, 6.0), 2.0 + 0.05 * np.arange(4), 0.1 * np.arange(4)])
+    noisy = _rays(wall, truth) + rng.normal(0, 2 * SIGMA * 2, (4, 3))
+    noisy /= np.linalg.norm(noisy, axis=1, keepdims=True)
+    start = truth + np.array([0.03, 0.0, 0.0])
+    loose = refine_absolute(start, noisy, wall, *args)
+    held = refine_absolute(start, noisy, wall, *args,
+                           motion_prior=(truth, np.array([0.01, 0.01, 0.005])))
+    assert held is not None
+    assert np.hypot(*(held[0][:2] - truth[:2])) < 0.02
+    assert loose is None or np.hypot(*(loose[0][:2] - truth[:2])) > 0.05
+    # The prior's information enters the covariance: it is no wider than without it.
+    if loose is not None:
+        assert np.trace(held[1][:2, :2]) <= np.trace(loose[1][:2, :2])

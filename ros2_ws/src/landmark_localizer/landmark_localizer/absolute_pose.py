@@ -209,7 +209,8 @@ def _residuals_many(states: np.ndarray, rays: np.ndarray, points: np.ndarray) ->
 
 def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
                     threshold: float, sigma: float, tilt_prior: float,
-                    height_prior: float, iterations: int = 8
+                    height_prior: float, iterations: int = 8,
+                    motion_prior: tuple[np.ndarray, np.ndarray] | None = None
                     ) -> tuple[np.ndarray, np.ndarray] | None:
     """Gauss-Newton with Huber weights: ``(state (6,), covariance of (x, y, yaw))``.
 
@@ -223,10 +224,15 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
             (0: kept level).
         height_prior: prior standard deviation of its height offset, metres (0: none).
         iterations: at most this many Gauss-Newton steps.
+        motion_prior: ``(predicted pose (3,), standard deviations (3,))`` of the camera's
+            ``(x, y, yaw)`` from the motion model, or None (no prior on the pose).
     """
     state = np.concatenate([np.asarray(pose, float), np.zeros(3)])
     free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])
     prior = np.array([0, 0, 0, tilt_prior, tilt_prior, height_prior], float)
+    centre = np.zeros(6)
+    if motion_prior is not None:
+        centre[:3], prior[:3] = motion_prior[0], motion_prior[1]
     step = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-5])
     n_free = int(free.sum())
     prior_info = np.diag(np.where(prior[free] > 0, (sigma / np.maximum(prior[free], 1e-12)) ** 2,
@@ -243,7 +249,9 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
         weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
         jw = jac * weights[:, None]
         info = jw.T @ jac + prior_info
-        gradient = jw.T @ r.ravel() + prior_info @ state[free]
+        offset = state[free] - centre[free]
+        offset[2] = float(wrap_angle(offset[2]))  # yaw is always free
+        gradient = jw.T @ r.ravel() + prior_info @ offset
         try:
             delta = np.linalg.solve(info + 1e-12 * np.eye(n_free), -gradient)
         except np.linalg.LinAlgError:
@@ -462,7 +470,8 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
 
 
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
-                     seed: PoseSolution, config: LocalizerConfig, strict: bool = False
+                     seed: PoseSolution, config: LocalizerConfig, strict: bool = False,
+                     motion_prior: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> PoseSolution | None:
     """Check and polish a pose solve on the tracked features' class points.
 
@@ -492,7 +501,7 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
         return None
     if inliers.sum() < config.min_inliers:
         return seed
-    args = (threshold, 0.5 / focal, tilt_prior, config.height_prior_m)
+    args = (threshold, 0.5 / focal, tilt_prior, config.height_prior_m, 8, motion_prior)
     found = refine_absolute(start, rays[inliers], points[inliers], *args)
     if found is None:
         return seed

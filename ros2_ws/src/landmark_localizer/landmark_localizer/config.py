@@ -75,6 +75,10 @@ class LocalizerConfig:
         absolute_min_spread_deg: least spread of the inliers' bearings, degrees.
         absolute_prior_s: a pose at most this old (carried by the motion) bounds the
             absolute pose to ``max_jump_m`` from it.
+        motion_prior_m: standard deviation of the predicted camera position in the
+            refinement of a tracked pose on its classes' points, metres (0: no motion
+            prior).
+        motion_prior_deg: ... and of its predicted heading, degrees.
         seed: random generator seed of the robust solvers.
     """
 
@@ -112,6 +116,8 @@ class LocalizerConfig:
     absolute_threshold_px: float = 3.0
     absolute_min_spread_deg: float = 20.0
     absolute_prior_s: float = 3.0
+    motion_prior_m: float = 0.02
+    motion_prior_deg: float = 1.0
     seed: int = 0
 
     def __post_init__(self) -> None:

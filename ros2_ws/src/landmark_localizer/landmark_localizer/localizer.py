@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 import logging
+import math
 import time
 
 import numpy as np
@@ -385,7 +386,8 @@ class Localizer:
                                   tracks.uv.astype(float), config, self.rng, predicted)
         if solution is not None and self.config.absolute_min_inliers > 0:
             solution = refine_on_points(self.index, tracks.class_ids,
-                                        tracks.uv.astype(float), solution, config)
+                                        tracks.uv.astype(float), solution, config,
+                                        motion_prior=self._motion_prior(predicted))
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
             if jump > config.max_jump_m:
@@ -405,6 +407,16 @@ class Localizer:
         self._last_solution = solution
         self._maybe_switch(frame, region.index)
         return solution, len(tracks), False
+
+    def _motion_prior(self, predicted: np.ndarray | None
+                      ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return the motion model's prior on the tracked camera pose, or None."""
+        config = self.config
+        if predicted is None or config.motion_prior_m <= 0 or config.motion_prior_deg <= 0:
+            return None
+        std = np.array([config.motion_prior_m, config.motion_prior_m,
+                        math.radians(config.motion_prior_deg)])
+        return np.asarray(predicted[:3], float), std
 
     def _redetect(self, image: np.ndarray, tracks: Tracks, region, predicted: np.ndarray
                   ) -> Tracks:
