@@ -17,7 +17,7 @@ import sys
 import numpy as np
 import pytest
 
-from landmark_db.database import open_database
+from landmark_db.database import database_summary, open_database
 from vbn_common.bags import BagWriter, open_bag
 
 pytestmark = pytest.mark.integration
@@ -78,7 +78,13 @@ def test_database_is_far_smaller_than_every_descriptor(room_build) -> None:
     db = open_database(room_build['db'])
     # The full unpruned feature database: every SIFT descriptor (uint8) of every image.
     features = int(re.search(r'features=(\d+)', room_build['output']).group(1))
-    assert room_build['db'].stat().st_size * 20 < features * 128
+    # The regions and their landmarks: 20 times smaller than every descriptor. The scene
+    # points (one descriptor each, for poses outside the regions) add less than that again.
+    tables = database_summary(room_build['db']).table_bytes
+    points = tables.get('scene_points', db.points.n_points * 180)
+    assert (room_build['db'].stat().st_size - points) * 20 < features * 128
+    assert room_build['db'].stat().st_size * 10 < features * 128
+    assert db.points.n_points < features // 20
     assert db.classes.descriptors.shape[0] <= 4 * db.n_classes
 
 
