@@ -141,7 +141,7 @@ class Localizer:
         self.hint: tuple[np.ndarray, float] | None = None
         self._failures = 0
         self._features = None  # this frame's voting features and their nearest classes
-        self._scene = None  # ... and their nearest scene points (a 1-tuple)
+        self._scene = None  # ... and their nearest scene points
         self._last_camera: np.ndarray | None = None  # the last published camera pose
 
     # -- control --------------------------------------------------------------------------
@@ -250,11 +250,14 @@ class Localizer:
                                  self._scene_matches(features))
 
     def _scene_matches(self, features):  # noqa: ANN001, ANN202 - nearest scene points
-        """Return this frame's matches to the scene points (computed once), or None."""
+        """Return this frame's matches to the scene points (computed once), or None.
+
+        None when the database holds no scene points (asking again costs nothing then).
+        """
         if self._scene is None:
-            self._scene = (self.index.nearest_scene_points(features.descriptors,
-                                                           self.config.vote_checks),)
-        return self._scene[0]
+            self._scene = self.index.nearest_scene_points(features.descriptors,
+                                                          self.config.vote_checks)
+        return self._scene
 
     def _absolute_polish(self, image: np.ndarray, frame: Frame, solution: PoseSolution
                          ) -> PoseSolution:

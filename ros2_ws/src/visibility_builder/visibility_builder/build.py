@@ -442,10 +442,11 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
             'filters.min_block)')
 
     stages.begin('points')
-    points = scene_points(
-        labels_by_image(sampling.frames_of_pose, classes.labels, [len(f) for f in features]),
-        features, np.array([f.camera_pose for f in frames], float),
-        exploration.camera_model(), kept, config.points)
+    image_labels = labels_by_image(sampling.frames_of_pose, classes.labels,
+                                   [len(f) for f in features])
+    points = scene_points(image_labels, features,
+                          np.array([f.camera_pose for f in frames], float),
+                          exploration.camera_model(), kept, config.points)
     stages.end(points=points.n_points, of_kept_classes=int((points.class_ids >= 0).sum()))
 
     stages.begin('decompose', f'{config.decomposition.algorithm}, k={config.decomposition.k}')
@@ -477,7 +478,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
             f'rho={dc.rho} neighbourhood (lower --k or --rho)')
 
     stages.begin('model_views')
-    database = replace(_assemble(exploration, sampling, features, classes.labels, kept,
+    database = replace(_assemble(exploration, sampling, features, image_labels, kept,
                                  visibility, decomposition, world, config,
                                  source or str(exploration.path)), points=points)
     final = database.service(world)
@@ -506,21 +507,22 @@ def _check_output(path: Path) -> None:
 
 
 def _assemble(exploration: Exploration, sampling: PoseSampling,
-              features: Sequence[ImageFeatures], pose_labels: Sequence[np.ndarray],
+              features: Sequence[ImageFeatures], verified_labels: Sequence[np.ndarray],
               kept: np.ndarray, visibility: sp.csr_matrix, decomposition: Decomposition,
               world: WorldInstance, config: BuildConfig, source: str) -> LandmarkDatabase:
+    # verified_labels: per image, the verified class of each feature (-1: none), before
+    # the filters' renumbering (scene_points.labels_by_image).
     frames = exploration.frames
     n_images = len(frames)
     # Database class numbering: position in ``kept``; a removed class becomes -1.
     remap = np.full(int(max(kept.max(initial=-1) + 1, 1 + max(
-        (int(lab.max(initial=-1)) for lab in pose_labels), default=-1))), -1, np.int64)
+        (int(lab.max(initial=-1)) for lab in verified_labels), default=-1))), -1, np.int64)
     remap[kept] = np.arange(kept.size)
     image_pose = np.empty(n_images, np.int64)
     for pose, members in enumerate(sampling.frames_of_pose):
         image_pose[list(members)] = pose
-    image_labels = [np.where(part >= 0, remap[np.maximum(part, 0)], -1) for part in
-                    labels_by_image(sampling.frames_of_pose, pose_labels,
-                                    [len(f) for f in features])]
+    image_labels = [np.where(part >= 0, remap[np.maximum(part, 0)], -1)
+                    for part in verified_labels]
     camera = np.array([f.camera_pose for f in frames], float)
     table = ImageTable(pose=image_pose, stamp_ns=np.array([f.stamp_ns for f in frames]),
                        camera_xy=camera[:, :2], camera_yaw=camera[:, 2], features=features,

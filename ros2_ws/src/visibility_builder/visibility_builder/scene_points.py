@@ -34,6 +34,7 @@ from landmark_db.database.points import ScenePoints
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.camera import CameraModel
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.verification import map_rays, reprojection_error
 
 __all__ = ['PointsConfig', 'labels_by_image', 'scene_points']
 
@@ -97,7 +98,7 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
     descriptors = np.concatenate([f.descriptors for f in features])[member]
     labels, image = labels[member], image[member]
     pose = np.asarray(camera_poses, float)[image]
-    rays = _map_rays(camera.unproject(uv), pose[:, 2])
+    rays = map_rays(camera.unproject(uv), pose[:, 2])
     centres = np.column_stack([pose[:, :2], np.zeros(len(pose))])
 
     ids, inverse = np.unique(labels, return_inverse=True)
@@ -124,7 +125,7 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
     to_point = points[inverse] - centres
     depth = np.einsum('ij,ij->i', to_point, rays)
     distance = np.linalg.norm(to_point, axis=1)
-    error = _reprojection_error(points[inverse], pose, uv, camera)
+    error = reprojection_error(points[inverse], pose, uv, camera)
     bad = ~np.isfinite(depth) | (depth <= 0) | (distance > config.max_distance_m) | \
         ~(error <= config.max_error_px)
     ok &= np.bincount(inverse, weights=bad, minlength=n) == 0
@@ -156,32 +157,3 @@ def labels_by_image(frames_of_pose: Sequence[Sequence[int]], pose_labels: Sequen
             out[i] = np.asarray(labels[start:start + n_features[i]], np.int64)
             start += n_features[i]
     return out
-
-
-def _map_rays(optical: np.ndarray, heading: np.ndarray) -> np.ndarray:
-    """(n, 3) ``map`` rays (z up) of levelled optical rays (x right, y down, z forward)."""
-    c, s = np.cos(heading), np.sin(heading)
-    forward, left, up = optical[:, 2], -optical[:, 0], -optical[:, 1]
-    return np.column_stack([c * forward - s * left, s * forward + c * left, up])
-
-
-def _reprojection_error(points: np.ndarray, pose: np.ndarray, uv: np.ndarray,
-                        camera: CameraModel) -> np.ndarray:
-    """Pixel distance between each member's keypoint and its point's projection."""
-    dx = points[:, 0] - pose[:, 0]
-    dy = points[:, 1] - pose[:, 1]
-    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
-    forward = c * dx + s * dy
-    left = -s * dx + c * dy
-    local = np.column_stack([-left, -points[:, 2], forward])
-    finite = np.all(np.isfinite(local), axis=1)
-    error = np.full(len(points), np.inf)
-    if finite.any():
-        proj, valid = camera.project(local[finite])
-        du = np.abs(proj[:, 0] - uv[finite, 0])
-        if camera.kind == 'panoramic':
-            du = np.minimum(du, camera.width - du)
-        e = np.hypot(du, proj[:, 1] - uv[finite, 1])
-        e[~valid] = np.inf
-        error[finite] = e
-    return error

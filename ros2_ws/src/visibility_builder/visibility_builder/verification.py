@@ -52,7 +52,7 @@ from vbn_common.geometry.camera import CameraModel
 from visibility_builder.classes import ClassResult
 from visibility_builder.errors import VisibilityBuilderError
 
-__all__ = ['VerifyConfig', 'verify_classes']
+__all__ = ['VerifyConfig', 'map_rays', 'reprojection_error', 'verify_classes']
 
 logger = logging.getLogger(__name__)
 
@@ -142,11 +142,7 @@ def verify_classes(classes: ClassResult, keypoints: Sequence[np.ndarray],
     # World ray of every classified feature: the optical-frame ray turned by the heading.
     rays = np.zeros((len(labels), 3))
     if order.size:
-        local = camera.unproject(uv[order])          # (X right, Y down, Z forward)
-        heading = pose[order, 2]
-        c, s = np.cos(heading), np.sin(heading)
-        forward, left, up = local[:, 2], -local[:, 0], -local[:, 1]
-        rays[order] = np.column_stack([c * forward - s * left, s * forward + c * left, up])
+        rays[order] = map_rays(camera.unproject(uv[order]), pose[order, 2])
     keep_feature = np.ones(len(labels), dtype=bool)
     keep_class = np.ones(classes.n_classes, dtype=bool)
     verified = outliers = 0
@@ -201,7 +197,7 @@ def _consistent_members(rays: np.ndarray, pose: np.ndarray, uv: np.ndarray, tol:
     centres = np.column_stack([pose[:, :2], np.zeros(len(pose))])
     while good.sum() >= 2:
         point = _nearest_point(rays[good], centres[good])
-        error = _reprojection_error(point, pose, uv, camera) / tol
+        error = reprojection_error(point, pose, uv, camera) / tol
         error[~good] = -np.inf
         worst = int(np.argmax(error))
         if error[worst] <= 1.0:
@@ -221,21 +217,43 @@ def _nearest_point(rays: np.ndarray, centres: np.ndarray) -> np.ndarray:
     return np.linalg.solve(a + 1e-9 * np.eye(3), b)
 
 
-def _reprojection_error(point: np.ndarray, pose: np.ndarray, uv: np.ndarray,
-                        camera: CameraModel) -> np.ndarray:
-    """Pixel distance between each member's keypoint and the point's projection."""
-    dx = point[0] - pose[:, 0]
-    dy = point[1] - pose[:, 1]
+def map_rays(optical: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """(n, 3) ``map`` rays (z up) of levelled optical rays (x right, y down, z forward)."""
+    c, s = np.cos(heading), np.sin(heading)
+    forward, left, up = optical[:, 2], -optical[:, 0], -optical[:, 1]
+    return np.column_stack([c * forward - s * left, s * forward + c * left, up])
+
+
+def reprojection_error(points: np.ndarray, pose: np.ndarray, uv: np.ndarray,
+                       camera: CameraModel) -> np.ndarray:
+    """Pixel distance between each member's keypoint and its point's projection.
+
+    Args:
+        points: ``(3,)`` one point for every member, or ``(n, 3)`` one each.
+        pose: ``(n, 3)`` the members' camera ``(x, y, heading)``.
+        uv: ``(n, 2)`` their keypoints.
+        camera: the camera as mounted.
+
+    Returns:
+        ``(n,)`` errors, inf where the point does not project (behind, not finite).
+    """
+    points = np.broadcast_to(np.asarray(points, float), (len(pose), 3))
+    dx = points[:, 0] - pose[:, 0]
+    dy = points[:, 1] - pose[:, 1]
     c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
     forward = c * dx + s * dy
     left = -s * dx + c * dy
-    local = np.column_stack([-left, np.full(len(pose), -point[2]), forward])
-    proj, valid = camera.project(local)
-    du = np.abs(proj[:, 0] - uv[:, 0])
-    if camera.kind == 'panoramic':
-        du = np.minimum(du, camera.width - du)
-    error = np.hypot(du, proj[:, 1] - uv[:, 1])
-    error[~valid | ~np.isfinite(error)] = np.inf
+    local = np.column_stack([-left, -points[:, 2], forward])
+    finite = np.all(np.isfinite(local), axis=1)
+    error = np.full(len(pose), np.inf)
+    if finite.any():
+        proj, valid = camera.project(local[finite])
+        du = np.abs(proj[:, 0] - uv[finite, 0])
+        if camera.kind == 'panoramic':
+            du = np.minimum(du, camera.width - du)
+        e = np.hypot(du, proj[:, 1] - uv[finite, 1])
+        e[~valid | ~np.isfinite(e)] = np.inf
+        error[finite] = e
     return error
 
 

@@ -8,9 +8,8 @@ which the filters of Section 6.2.2 rightly keep out of the decomposition. The bu
 knows where each exploration image was taken, so every correspondence class whose
 member rays meet (the geometric check of ``visibility_builder.verification``) has a
 scene point. :class:`ScenePoints` keeps them, one descriptor each, so the localizer can
-compute a pose from 2D-3D matches where no region serves, and use the exact points of
-its region features (triangulated over every image that saw them, not just the model
-views) to check and polish its two-view poses.
+compute a pose from 2D-3D matches where no region serves (its tracked features keep the
+points of the region's model views, which polished the tracked poses better).
 
 Coordinates: ``(x, y)`` in ``map``, ``z`` from the exploration camera's height (the
 convention of the verification and of the localizer's rays). ``class_ids`` names the
