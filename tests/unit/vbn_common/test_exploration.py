@@ -269,6 +269,25 @@ def test_tilted_pose_and_changing_camera_info_warn(tmp_path: Path) -> None:
     assert '1 of 2 pose(s) are not planar (base_link tilted up to 5.7 deg' in text
 
 
+def test_a_static_mount_that_changes_mid_bag_is_one_warning(tmp_path: Path) -> None:
+    # The camera remounted between the two frames: 0.1 m -> 0.3 m ahead of base_link.
+    messages = exploration_messages(2)
+    messages.append(('/tf_static', TF, T0 + 10**9 // 2, T[TF](transforms=[
+        transform(T0 + 10**9 // 2, 'base_link', 'camera', (0.3, 0.0, 1.2), OPTICAL)])))
+    out = read_exploration(write_bag(tmp_path / 'b', sorted(messages, key=lambda m: m[2])))
+    changed = [w for w in out.warnings if 'changes during the bag' in w]
+    assert changed == ['the static transform base_link -> camera changes during the bag (by '
+                       '0.00 deg and 0.200 m): every frame uses its last value (tf2 keeps the '
+                       'newest static transform)']
+    assert len(out.frames) == 2
+    assert out.frames[0].camera_pose == pytest.approx((0.3, 0.0, 0.0), abs=1e-12)
+    # The same transform sent twice is no change.
+    again = exploration_messages(2) + [('/tf_static', TF, T0 + 10**9 // 2, T[TF](transforms=[
+        transform(T0 + 10**9 // 2, 'base_link', 'camera', (0.1, 0.0, 1.2), OPTICAL)]))]
+    out = read_exploration(write_bag(tmp_path / 'c', sorted(again, key=lambda m: m[2])))
+    assert not [w for w in out.warnings if 'changes during the bag' in w]
+
+
 def test_missing_camera_transform_assumes_the_base_heading(tmp_path: Path) -> None:
     out = read_exploration(write_bag(tmp_path / 'b', exploration_messages(2, with_static=False)))
     assert 'no transform base_link -> camera' in out.warnings[0]

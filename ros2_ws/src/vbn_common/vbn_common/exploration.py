@@ -475,6 +475,8 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         axis = 0
     else:
         cam_r, cam_t, cam_found = base_to_camera
+        for line in data.tf.static_change_warnings(config.base_frame, camera_frame):
+            warn(line)
         found &= cam_found
         camera_r, camera_t = compose_transforms((base_r, base_t), (cam_r, cam_t))
         axis = 2 if config.camera_forward_axis == 'z' else 0

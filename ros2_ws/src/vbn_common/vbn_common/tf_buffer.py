@@ -2,11 +2,12 @@
 
 The exploration reader needs each image's ``map -> base_link`` chain and the
 ``base_link -> camera`` mount: :class:`TfBuffer` collects the links of both topics (a
-newer static transform replaces an older one; a child with two parents is a conflict
-reported by the reader) and :meth:`TfBuffer.lookup` composes the chain from one frame
-to another at every stamp in one vectorised pass, each dynamic link taken at its
-nearest sample within a tolerance (no interpolation: an exploring robot stands still
-while it takes images). Messages are duck-typed; no ROS type is imported.
+newer static transform replaces an older one, as in tf2, and a replacement that moves
+the child is recorded in :attr:`TfBuffer.static_changes` for the reader to report; a
+child with two parents is a conflict reported by the reader) and
+:meth:`TfBuffer.lookup` composes the chain from one frame to another at every stamp in
+one vectorised pass, each dynamic link taken at its nearest sample within a tolerance
+(no interpolation: an exploring robot stands still while it takes images). Messages are duck-typed; no ROS type is imported.
 """
 from __future__ import annotations
 
@@ -70,6 +71,9 @@ class TfBuffer:
     def __init__(self) -> None:
         self.links: dict[str, TfLink] = {}  # by child frame
         self.conflicts: set[str] = set()
+        # Static links replaced by a different transform: child -> the largest change,
+        # (rotation in degrees, translation in metres).
+        self.static_changes: dict[str, tuple[float, float]] = {}
 
     def add(self, transform: Any, stamp_ns: int, static: bool) -> None:
         parent = str(transform.header.frame_id).lstrip('/')
@@ -81,6 +85,7 @@ class TfBuffer:
             self.conflicts.add(f'{child} (parents {link.parent} and {parent})')
             return
         elif static:  # a newer static transform replaces the older one
+            self._note_static_change(child, link, transform)
             link.stamps.clear()
             link.translations.clear()
             link.quaternions.clear()
@@ -90,6 +95,33 @@ class TfBuffer:
         link.stamps.append(stamp_ns)
         link.translations.append((float(t.x), float(t.y), float(t.z)))
         link.quaternions.append((float(q.x), float(q.y), float(q.z), float(q.w)))
+
+    def _note_static_change(self, child: str, link: TfLink, transform: Any) -> None:
+        """Record how far a replacing static transform moves ``child`` (if at all)."""
+        if not link.quaternions:
+            return
+        t, q = transform.transform.translation, transform.transform.rotation
+        old = quaternion_matrices([link.quaternions[-1]])[0]
+        new = quaternion_matrices([(float(q.x), float(q.y), float(q.z), float(q.w))])[0]
+        cosine = np.clip((np.trace(old.T @ new) - 1.0) / 2.0, -1.0, 1.0)
+        angle = float(np.degrees(np.arccos(cosine)))
+        shift = float(np.linalg.norm(np.subtract((float(t.x), float(t.y), float(t.z)),
+                                                 link.translations[-1])))
+        if angle > 1e-6 or shift > 1e-9:
+            before = self.static_changes.get(child, (0.0, 0.0))
+            self.static_changes[child] = (max(before[0], angle), max(before[1], shift))
+
+    def static_change_warnings(self, parent: str, child: str) -> list[str]:
+        """Return one line per static link of the chain ``parent -> child`` that moved."""
+        lines = []
+        for frame in (self.chain(parent, child) or [])[:-1]:
+            change = self.static_changes.get(frame)
+            if change is not None:
+                lines.append(f'the static transform {self.links[frame].parent} -> {frame} '
+                             f'changes during the bag (by {change[0]:.2f} deg and '
+                             f'{change[1]:.3f} m): every frame uses its last value (tf2 keeps '
+                             'the newest static transform)')
+        return lines
 
     def chain(self, parent: str, child: str) -> list[str] | None:
         """Return the frames from ``child`` up to ``parent`` (both included), or None."""
