@@ -7,7 +7,8 @@ the child is recorded in :attr:`TfBuffer.static_changes` for the reader to repor
 child with two parents is a conflict reported by the reader) and
 :meth:`TfBuffer.lookup` composes the chain from one frame to another at every stamp in
 one vectorised pass, each dynamic link taken at its nearest sample within a tolerance
-(no interpolation: an exploring robot stands still while it takes images). Messages are duck-typed; no ROS type is imported.
+(no interpolation: an exploring robot stands still while it takes images). Messages are
+duck-typed; no ROS type is imported.
 """
 from __future__ import annotations
 
