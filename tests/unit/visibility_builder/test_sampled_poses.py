@@ -271,3 +271,54 @@ def test_pinhole_exploration_bag_gives_a_heading_pose_space(tmp_path: Path) -> N
                           axis=1) == pytest.approx(1.5, abs=1e-9)
     assert sampling.grid.tolist() == np.repeat(positions.grid, 8, axis=0).tolist()
     assert_well_formed(sampling)
+
+
+@pytest.mark.parametrize('camera, hfov, headings, rho, turns, joined', [
+    ('fisheye', 180.0, 16, 1, 'auto', True),    # 22.5 degree sectors: 135 degrees common
+    ('fisheye', 180.0, 8, 1, 'auto', False),    # 45 degree sectors: 90 of 180 common
+    ('fisheye', 180.0, 16, 2, 'auto', False),   # a turn by +-45 degrees in the ball
+    ('pinhole', 90.0, 8, 1, 'auto', False),     # +-45 degrees of a 90 degree camera
+    ('pinhole', 90.0, 32, 1, 'auto', True),     # 11.25 degree sectors: 67.5 common
+    ('pinhole', 90.0, 8, 1, 'always', True),
+    ('fisheye', 180.0, 8, 1, 'never', False),
+])
+def test_turning_edges_join_neighbouring_sectors_by_the_sector_width_rule(
+        tmp_path: Path, camera: str, hfov: float, headings: int, rho: int, turns: str,
+        joined: bool) -> None:
+    spec = BagSpec(kind='exploration', camera=camera, width=32, height=24, spacing=1.5,
+                   hfov_deg=hfov, compression='jpeg', encoding='mono8', headings=headings)
+    write_bag(resolve_scene('room'), spec, tmp_path / 'bag')
+    exploration = read_exploration(tmp_path / 'bag')
+    sampling = sample_poses(exploration, SamplingConfig(turns=turns), rho=rho)
+    positions = sample_poses(exploration, SamplingConfig(headings=1))
+    n_positions = positions.n_poses
+    assert sampling.headings == headings and sampling.turns is joined
+    a, b = sampling.edges.T
+    same_position = np.linalg.norm(sampling.positions[a] - sampling.positions[b], axis=1) < 1e-9
+    # Steps: each lattice edge once per sector, within the sector.
+    assert np.count_nonzero(~same_position) == headings * len(positions.edges)
+    assert np.all(sampling.sector[a[~same_position]] == sampling.sector[b[~same_position]])
+    # Turns: each position's ring of sectors, neighbours one sector apart (mod N).
+    turn = (sampling.sector[b[same_position]] - sampling.sector[a[same_position]]) % headings
+    assert np.count_nonzero(same_position) == (headings * n_positions if joined else 0)
+    assert np.all((turn == 1) | (turn == headings - 1))
+    assert n_components(sampling) == (1 if joined else headings)
+    assert_well_formed(sampling)
+
+
+@pytest.mark.parametrize('camera, hfov', [('pinhole', 90.0), ('pinhole', 60.0),
+                                          ('fisheye', 180.0), ('fisheye', 200.0)])
+def test_horizontal_fov_of_the_camera_models(camera: str, hfov: float) -> None:
+    from vbn_common.geometry.camera import make_camera
+    from visibility_builder.sampled_poses import horizontal_fov
+
+    model = make_camera(camera, 640, 480, hfov_deg=hfov)
+    assert math.degrees(horizontal_fov(model)) == pytest.approx(hfov, abs=1e-6)
+    assert horizontal_fov(make_camera('panoramic', 640, 120)) == pytest.approx(2 * math.pi)
+
+
+def test_turns_setting_is_checked() -> None:
+    with pytest.raises(VisibilityBuilderError, match='turns'):
+        SamplingConfig(turns='sometimes')
+    with pytest.raises(VisibilityBuilderError, match='turn_overlap'):
+        SamplingConfig(turn_overlap=1.0)

@@ -383,7 +383,7 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
         raise VisibilityBuilderError(f'no usable image in {exploration.path}')
 
     stages.begin('sample')
-    sampling = sample_poses(exploration, config.sampling)
+    sampling = sample_poses(exploration, config.sampling, config.decomposition.rho)
     stages.end(poses=sampling.n_poses, edges=int(len(sampling.edges)),
                spacing=sampling.spacing, graph=sampling.graph, headings=sampling.headings)
 
