@@ -280,7 +280,7 @@ def test_pinhole_exploration_bag_gives_a_heading_pose_space(tmp_path: Path) -> N
     ('pinhole', 90.0, 8, 1, 'auto', False),     # +-45 degrees of a 90 degree camera
     ('pinhole', 90.0, 32, 1, 'auto', True),     # 11.25 degree sectors: 67.5 common
     ('pinhole', 90.0, 8, 1, 'always', True),
-    ('fisheye', 180.0, 8, 1, 'never', False),
+    ('fisheye', 180.0, 16, 1, 'never', False),
 ])
 def test_turning_edges_join_neighbouring_sectors_by_the_sector_width_rule(
         tmp_path: Path, camera: str, hfov: float, headings: int, rho: int, turns: str,

@@ -35,31 +35,31 @@ pose (the rule above) gives poses whose features no single image shows. With
 ``headings`` sectors (``N``, or the exploration's own count of headings per position
 when 0, the default, and the camera is not a panorama) a sampled pose is a (position,
 heading sector) pair: one image per pose, as the thesis's Chapter 3 assumes. ``G``
-joins the poses of neighbouring positions in the same sector and, when the sectors are
-narrow enough (below), the neighbouring sectors of one position: a turn on the spot is
-then an edge like a step, the decomposition runs on ``G`` unchanged, and the
-rho-neighbourhood of a pose spans rho sectors to either side (a region's landmark stays
-in view while the robot turns by rho sectors).
+joins the poses of neighbouring positions in the same sector and, with ``turns`` set
+(below), the neighbouring sectors of one position: a turn on the spot is then an edge
+like a step, the decomposition runs on ``G`` unchanged, and the rho-neighbourhood of a
+pose spans rho sectors to either side (a region's landmark stays in view while the
+robot turns by rho sectors).
 
 **Sector width.** The sector width ``w = 360 / N`` degrees is the exploration's heading
 step. A turning edge is worth having only if the views it joins share features: the
 rho-neighbourhood of a pose holds views turned by up to ``rho * w`` either way, whose
-common field is ``hfov - 2 rho w``. ``turns='auto'`` (the default) joins neighbouring
-sectors when that common field keeps at least ``turn_overlap`` (three quarters) of the
-camera's horizontal field ``hfov``, i.e. ``w <= hfov (1 - turn_overlap) / (2 rho)``: a
-180 degree fisheye needs 16 headings (22.5 degree sectors), a 90 degree pinhole 32. With
-the exploration's default 8 headings the sectors stay layers of their own. Measured on
-the 180 degree fisheye room (8 headings, rho = 1, k = 8): joining its 45 degree sectors
-(``turns='always'``, 90 degrees common) leaves 483 k-coverable poses against 1,159 in
-layers, and the room run 98.6 % posed at 0.76 / 5.75 cm median / p95 against 99.6 % at
-0.48 / 3.88 cm: a landmark that must stay in view through a 45 degree turn either way
-has to lie in the middle half of the image, and the classes matched across headings
-lose more features to the symmetry check. A 90 degree pinhole turned by +-45 degrees
-keeps no common field at all, so a rho = 1 neighbourhood with turns would keep no
-feature. In layers the localizer crosses a sector by switching to a region of the
-predicted heading (:func:`landmark_localizer.switching.choose_region`); ``turns=
-'always'`` and ``'never'`` override the rule. A panorama keeps the position-only pose
-space.
+common field is ``hfov - 2 rho w``. ``turns='auto'`` joins neighbouring sectors when
+that common field keeps at least ``turn_overlap`` (three quarters) of the camera's
+horizontal field ``hfov``, i.e. ``w <= hfov (1 - turn_overlap) / (2 rho)``: a 180 degree
+fisheye needs 16 headings (22.5 degree sectors), a 90 degree pinhole 32; a 90 degree
+pinhole turned by +-45 degrees (8 headings) keeps no common field at all, and a rho = 1
+neighbourhood with turns would keep no feature. ``turns='always'`` joins them whatever
+the width. The default, ``'never'``, keeps every sector a layer of its own, because
+joining measured worse on every exploration tried (the fisheye room, ``docs/classes.md``:
+8 headings 99.6 % -> 98.6 % posed, p95 3.88 -> 5.75 cm; 16 headings 99.8 % -> 96.3 %,
+p95 3.14 -> 8.34 cm): a landmark that must stay in view through a turn either way has
+to lie in the middle of the image, and classes matched across headings (Algorithm 6.3
+then compares neighbouring sectors too, without which no class spans a turn) lose many
+more features to the symmetry check. In layers the localizer crosses a sector by
+switching to a region of the predicted heading
+(:func:`landmark_localizer.switching.choose_region`). A panorama keeps the position-only
+pose space.
 
 Complexity: ``O(n log n)`` (k-d tree queries and sorts) for ``n`` frames.
 """
@@ -104,8 +104,8 @@ class SamplingConfig:
             positions only (all headings of a position one pose, Section 6.2.1), N >= 2
             for N sectors.
         turns: whether ``G`` joins the neighbouring heading sectors of a position:
-            ``'auto'`` (by the sector-width rule of the module docstring),
-            ``'always'`` or ``'never'``.
+            ``'never'`` (the default, measured best), ``'auto'`` (by the sector-width
+            rule of the module docstring) or ``'always'``.
         turn_overlap: the share of the camera's horizontal field that the views of a
             rho-neighbourhood must have in common for ``'auto'`` to join sectors.
     """
@@ -116,7 +116,7 @@ class SamplingConfig:
     connectivity: int = 4
     knn: int = 6
     headings: int = 0
-    turns: str = 'auto'
+    turns: str = 'never'
     turn_overlap: float = 0.75
 
     def __post_init__(self) -> None:
@@ -283,7 +283,7 @@ def _join_turns(exploration: Any, headings: int, rho: int, config: SamplingConfi
     width = 2.0 * math.pi / headings
     common = fov - 2.0 * max(int(rho), 1) * width
     join = common >= config.turn_overlap * fov - 1e-9
-    _LOG.info('%.0f degree heading sectors, %.0f degree camera: the views of a rho = %d '
+    _LOG.info('%.1f degree heading sectors, %.0f degree camera: the views of a rho = %d '
               'neighbourhood share %.0f degrees, turns %s', math.degrees(width),
               math.degrees(fov), rho, max(math.degrees(common), 0.0),
               'are edges of G' if join else 'are not edges of G (sectors are layers)')
