@@ -4,6 +4,7 @@ from __future__ import annotations
 from types import SimpleNamespace as Ns
 
 import numpy as np
+import pytest
 
 from vbn_common.tf_buffer import TfBuffer, nearest_stamps, quaternion_matrices
 
@@ -51,3 +52,16 @@ def test_a_second_parent_is_a_conflict_and_static_replaces():
     assert tf.conflicts == {'camera (parents base_link and odom)'}
     _, translation, _ = tf.lookup('base_link', 'camera', np.array([0]), 0)
     assert np.allclose(translation[0], [0, 0, 0.7])
+
+
+def test_rotation_angles_between_rotations() -> None:
+    from vbn_common.tf_buffer import rotation_angles_deg
+
+    def rot_z(deg: float) -> np.ndarray:
+        c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+        return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+    many = np.stack([rot_z(d) for d in (0.0, 30.0, -90.0, 180.0)])
+    assert rotation_angles_deg(np.eye(3), many) == pytest.approx([0.0, 30.0, 90.0, 180.0])
+    assert float(rotation_angles_deg(rot_z(10.0), rot_z(45.0))) == pytest.approx(35.0)
+    assert np.isnan(rotation_angles_deg(np.eye(3), np.full((3, 3), np.nan)))

@@ -17,13 +17,12 @@ predicted position; the path is sampled from the current position to twice the
 prediction, and each candidate scores the samples whose nearest pose it contains.
 
 In a heading pose space (cameras that do not see all around) a turn is a step in the
-pose space like a move: where the pose graph joins neighbouring sectors (narrow sectors,
-:mod:`visibility_builder.sampled_poses`) regions span turns and the rule applies as
-written. Where the sectors are layers of their own (a 90 degree pinhole with 45 degree
-sectors) no region holds two sectors and a turn into the next sector has no region
-"containing both positions": the candidates are then the regions of the predicted pose,
-and the switch happens while the current region still gives the pose (the turn's make
-before break).
+pose space like a move: where the pose graph joins neighbouring sectors (the builder's
+``sampling.turns``) regions span turns and the rule applies as written. Where the
+sectors are layers of their own (the default) no region holds two sectors and a turn
+into the next sector has no region "containing both positions": the candidates are then
+the regions of the predicted pose, and the switch happens while the current region still
+gives the pose (the turn's make before break).
 """
 from __future__ import annotations
 

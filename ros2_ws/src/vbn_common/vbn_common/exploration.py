@@ -77,6 +77,7 @@ from vbn_common.tf_buffer import (
     compose_transforms,
     nearest_stamps,
     quaternion_matrices,
+    rotation_angles_deg,
 )
 
 __all__ = [
@@ -541,9 +542,8 @@ def _frame_tilts(camera_r: np.ndarray, valid: np.ndarray, mount: np.ndarray | No
     """
     tilts = np.einsum('nji,njk->nik', level_frames(camera_r[:, :, 2]), camera_r)
     mount = np.eye(3) if mount is None else mount
-    cosine = (np.einsum('ji,nji->n', mount, tilts) - 1.0) / 2.0   # trace(mount^T tilt)
     with np.errstate(invalid='ignore'):
-        off = np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0))) > 1e-3
+        off = rotation_angles_deg(mount, tilts) > 1e-3
     keep = valid & off & np.isfinite(tilts).all(axis=(1, 2))
     return [tilts[i] if keep[i] else None for i in range(len(camera_r))]
 
@@ -562,7 +562,7 @@ def _mount_tilt(rotations: np.ndarray, found: np.ndarray, camera_frame: str,
         tilts = [level_tilt(rotations[i]) for i in usable[[0, -1]]]
     except VbnCommonError:
         return None     # looking straight up or down: those frames are skipped as invalid
-    change = np.degrees(np.arccos(np.clip((np.trace(tilts[0].T @ tilts[1]) - 1) / 2, -1, 1)))
+    change = float(rotation_angles_deg(tilts[0], tilts[1]))
     if change > 0.01:
         warn(f'{config.base_frame} -> {camera_frame} changes during the bag (by '
              f'{change:.2f} deg): using its first value')

@@ -17,12 +17,24 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['TfBuffer', 'TfLink', 'compose_transforms', 'nearest_stamps', 'quaternion_matrices']
+__all__ = ['TfBuffer', 'TfLink', 'compose_transforms', 'nearest_stamps', 'quaternion_matrices',
+           'rotation_angles_deg']
 
 
 # -- rigid transforms, vectorised --------------------------------------------------------
 # geometry.frames holds the planar pose algebra; the tf chain needs full 3-D rotations
 # (the optical camera frame is not a yaw rotation of base_link), stacked per image.
+def rotation_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return the angle in degrees of the rotation from ``a`` to ``b``, ``(..., 3, 3)`` each.
+
+    ``arccos((trace(a^T b) - 1) / 2)``, clipped; NaN where either holds a NaN.
+    """
+    cosine = (np.einsum('...ji,...ji->...', np.asarray(a, float), np.asarray(b, float))
+              - 1.0) / 2.0
+    with np.errstate(invalid='ignore'):
+        return np.degrees(np.arccos(np.clip(cosine, -1.0, 1.0)))
+
+
 def quaternion_matrices(q: np.ndarray) -> np.ndarray:
     """``(n, 4)`` quaternions ``(x, y, z, w)`` -> ``(n, 3, 3)`` rotations; zero -> NaN."""
     q = np.asarray(q, dtype=float).reshape(-1, 4)
@@ -102,10 +114,9 @@ class TfBuffer:
         if not link.quaternions:
             return
         t, q = transform.transform.translation, transform.transform.rotation
-        old = quaternion_matrices([link.quaternions[-1]])[0]
-        new = quaternion_matrices([(float(q.x), float(q.y), float(q.z), float(q.w))])[0]
-        cosine = np.clip((np.trace(old.T @ new) - 1.0) / 2.0, -1.0, 1.0)
-        angle = float(np.degrees(np.arccos(cosine)))
+        old, new = quaternion_matrices([link.quaternions[-1],
+                                        (float(q.x), float(q.y), float(q.z), float(q.w))])
+        angle = float(rotation_angles_deg(old, new))
         shift = float(np.linalg.norm(np.subtract((float(t.x), float(t.y), float(t.z)),
                                                  link.translations[-1])))
         if angle > 1e-6 or shift > 1e-9:

@@ -370,15 +370,13 @@ def _heading_poses(base: np.ndarray, camera: np.ndarray, labels: np.ndarray, hea
     if turns:                             # same position, neighbouring sectors
         turned = np.roll(table, -1, axis=1)
         both = (table >= 0) & (turned >= 0)
-        if headings == 2:                 # sectors 0 and 1 are neighbours once
-            both[:, 1] = False
         edges.append(np.stack([table[both], turned[both]], axis=1))
     edges = _unique_edges(np.concatenate(edges).astype(np.int64))
     n_components = _components(n, edges)[0]
     if n_components > (1 if turns else headings):
         _LOG.warning('the pose graph (%s x %d headings) has %d connected components', graph,
                      headings, n_components)
-    _LOG.info('%d frames -> %d sampled poses at %d positions x %d headings (%.0f degree '
+    _LOG.info('%d frames -> %d sampled poses at %d positions x %d headings (%.1f degree '
               'sectors%s); %s graph, %d edges, spacing %s', len(base), n, n_positions,
               headings, np.degrees(width), ', turns joined' if turns else '', graph,
               len(edges), 'none' if spacing is None else f'{spacing:.4f} m')
