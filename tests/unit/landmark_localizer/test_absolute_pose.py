@@ -6,6 +6,7 @@ import math
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
+import pytest
 
 from landmark_localizer.absolute_pose import base_rays, hypotheses, refine_absolute, solve_absolute
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
@@ -311,3 +312,54 @@ def test_the_motion_prior_holds_a_pose_the_points_leave_loose() -> None:
     # The prior's information enters the covariance: it is no wider than without it.
     if loose is not None:
         assert np.trace(held[1][:2, :2]) <= np.trace(loose[1][:2, :2])
+
+
+def test_points_in_a_narrow_cone_polish_the_seed_only_with_the_motion_prior() -> None:
+    """Points 7 degrees across fix the bearing; the motion prior fixes the rest.
+
+    A two-view seed 20 cm off stays as it is without a prior (the points alone cannot
+    judge it); with the prior 1 cm from the truth, points and prior put it within 1 cm.
+    """
+    from landmark_localizer.absolute_pose import refine_on_points
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.localize import PoseEstimate
+
+    rng = np.random.default_rng(11)
+    n = 40
+    # A patch on the wall x = 6 seen from (2, 1.5): 0.5 m wide at 4 m is 7 degrees.
+    points = np.column_stack([np.full(n, 6.0), rng.uniform(1.25, 1.75, n),
+                              rng.uniform(0.6, 2.0, n)])
+    from localizer_samples import project, synthetic_database
+
+    from landmark_localizer.index import DatabaseIndex
+
+    index = DatabaseIndex(synthetic_database(rng, points))
+    truth = np.array([2.0, 1.5, 0.05])
+    uv, ok = project(truth, points)
+    ids = np.flatnonzero(ok)
+    assert len(ids) == n
+    uv = uv[ids] + rng.normal(0, 0.2, (n, 2))
+    wrong = truth + [0.2, 0.02, 0.0]   # along the line of sight: the points barely object
+    estimate = PoseEstimate(*wrong, np.eye(3) * 1e-4, 0.5, 0.0, 2, True)
+    seed = PoseSolution(estimate, ids, 2, n, 0.3)
+    config = LocalizerConfig()
+    assert refine_on_points(index, ids, uv, seed, config) is seed
+    prior = (truth + [0.01, 0.0, 0.0], np.array([0.02, 0.02, math.radians(1.0)]))
+    found = refine_on_points(index, ids, uv, seed, config, motion_prior=prior)
+    assert found is not None and found is not seed
+    assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
+
+
+def test_residuals_are_judged_at_the_coarser_cameras_pixels() -> None:
+    """A run camera of twice the database's resolution: the database's pixels count."""
+    from localizer_samples import CAMERA
+
+    from vbn_common.geometry.camera import PanoramicCamera, pixels_per_radian
+
+    _, index = _world()
+    assert index.residual_focal == pytest.approx(pixels_per_radian(CAMERA))
+    index.frame_camera = PanoramicCamera(2 * CAMERA.width, 2 * CAMERA.height)
+    assert index.residual_focal == pytest.approx(pixels_per_radian(CAMERA))
+    index.frame_camera = PanoramicCamera(CAMERA.width // 2, CAMERA.height // 2)
+    assert index.residual_focal == pytest.approx(pixels_per_radian(CAMERA) / 2)

@@ -34,7 +34,7 @@ from landmark_db.database import LandmarkDatabase
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.matching import grouped_nearest, squared_distances
 from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.camera import CameraModel, camera_from_info
+from vbn_common.geometry.camera import CameraModel, camera_from_info, pixels_per_radian
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from vbn_common.geometry.mount import tilted
 
@@ -173,6 +173,19 @@ class DatabaseIndex:
             scene.descriptors.astype(np.float32), {'algorithm': _FLANN_KDTREE,
                                                    'trees': FLANN_TREES}) \
             if scene.n_points >= 2 else None
+
+    @property
+    def residual_focal(self) -> float:
+        """Pixels per radian at which a pose's residuals are judged.
+
+        Every residual mixes the database's measurements (model view keypoints, class
+        points triangulated from them) with the frame's, so its noise is that of the
+        coarser camera: a run camera of twice the database's resolution, judged at its
+        own pixels, rejected correct correspondences for the database's half-pixel
+        noise and fitted a wrong pose to the few it kept (a 1280 x 960 pinhole run on a
+        640 x 480 database: tracked poses 20 to 40 cm off from tracks within 0.6 px).
+        """
+        return min(pixels_per_radian(self.camera), pixels_per_radian(self.frame_camera))
 
     def class_descriptors(self, class_id: int) -> np.ndarray:
         """(d, 128) float32: the representative descriptors of one class."""

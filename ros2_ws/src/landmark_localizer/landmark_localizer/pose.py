@@ -20,7 +20,6 @@ from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.tilt_refinement import marginal_covariance, refine_tilted
 from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.camera import pixels_per_radian
 from vbn_common.geometry.epipolar import pointwise_planar_residuals
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 from vbn_common.geometry.localize import PoseEstimate, position_from_views
@@ -77,7 +76,7 @@ def solve_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     Returns:
         The solution, or None when fewer than two views give a trustworthy motion.
     """
-    focal = pixels_per_radian(index.frame_camera)
+    focal = index.residual_focal
     two_view = TwoViewConfig(threshold_px=max(1.0, 0.75 * config.max_residual_px))
     poses, motions, kept, outliers = [], [], [], set()
     total, worst = 0, 0.0
@@ -242,7 +241,7 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
         The solution, or None when fewer than two views have ``min_inliers`` inliers,
         the step diverges, or the residual exceeds ``max_residual_px``.
     """
-    focal = pixels_per_radian(index.frame_camera)
+    focal = index.residual_focal
     data = _correspondences(index, region, class_ids, uv, config.min_inliers)
     if data is None:
         return None
