@@ -52,3 +52,43 @@ def test_lens_rooms_carry_the_real_cameras_targets() -> None:
     assert '| room_run_fisheye availability | 0.87 | >= 0.95 | FAIL |' in text
     assert '| room_run_fisheye largest translation error, m | 0.6 | <= 0.5 | FAIL |' in text
     assert 'room_run_fisheye latency' not in text
+
+
+def test_conditions_carry_the_real_cameras_targets() -> None:
+    """pitch2 against level (1.2x), vibration p95 5 cm, height 90 % / 10 cm, floor lens."""
+    level = figures(1.0, 0.004, 0.015, 0.008, 0.05)
+    pitched = figures(1.0, 0.0046, 0.019, 0.008, 0.05)   # median 1.15x, p95 1.27x level's
+    shaking = figures(0.98, 0.011, 0.041, 0.008, 0.05)
+    higher = figures(0.89, 0.003, 0.016, 0.008, 0.05)
+    floor = figures(0.97, 0.01, 0.06, 0.013, 0.2)
+    for fig in (level, pitched, shaking, higher, floor):
+        fig['evo']['translation_max_m'] = 0.2
+    text, passed = report({'cond_level': level, 'cond_pitch2': pitched,
+                           'cond_vibration': shaking, 'cond_height': higher,
+                           'cond_floor_pinhole': floor})
+    assert not passed
+    assert '| cond_pitch2 translation median / level | 1.15 | <= 1.2 | PASS |' in text
+    assert '| cond_pitch2 translation p95 / level | 1.267 | <= 1.2 | FAIL |' in text
+    assert '| cond_vibration translation p95 (evo), m | 0.041 | <= 0.05 | PASS |' in text
+    assert '| cond_height availability | 0.89 | >= 0.9 | FAIL |' in text
+    assert '| cond_floor_pinhole translation p95 (evo), m | 0.06 | <= 0.08 | PASS |' in text
+    assert '| cond_floor_pinhole CPU time TRACKING p95, s | 0.013 | <= 0.012 | FAIL |' in text
+    assert '| cond_level largest translation error, m | 0.2 | <= 0.5 | PASS |' in text
+
+
+def test_condition_names_parse_and_pitch2_brings_its_reference() -> None:
+    import pytest
+
+    from landmark_localizer.bench.conditions import CONDITIONS, lens_render_argv
+    from landmark_localizer.cli.bench_localize import _conditions
+    from landmark_localizer.errors import LocalizerError
+
+    assert _conditions('') == []
+    assert _conditions('all') == list(CONDITIONS)
+    assert _conditions('vibration, pitch2') == ['vibration', 'level', 'pitch2']
+    with pytest.raises(LocalizerError, match="unknown condition 'tilt'"):
+        _conditions('tilt')
+    floor = CONDITIONS['floor_pinhole']
+    assert floor.exploration == tuple(lens_render_argv('pinhole', 'exploration', 'floor'))
+    assert floor.exploration[:3] == ('render', '--scene', 'floor')
+    assert CONDITIONS['hires'].run[-4:] == ('--width', '1280', '--height', '960')

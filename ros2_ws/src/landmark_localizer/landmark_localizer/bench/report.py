@@ -11,10 +11,13 @@ import math
 from pathlib import Path
 from typing import Any
 
-__all__ = ['LENS_TRACKING_P95_S', 'report']
+from landmark_localizer.bench.conditions import (
+    CONDITIONS,
+    LENS_TRACKING_P95_S,
+    condition_targets,
+)
 
-#: The real-cameras issue's TRACKING latency target for a pinhole camera, one core.
-LENS_TRACKING_P95_S = 0.012
+__all__ = ['report']
 
 
 def _get(fig: dict[str, Any], *path: str) -> float:
@@ -133,6 +136,9 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
                    LENS_TRACKING_P95_S)
             target(f'{name} CPU time TRACKING p95, s',
                    _get(fig, 'cpu_latency', 'tracking_p95'), LENS_TRACKING_P95_S)
+    for name in CONDITIONS:
+        if f'cond_{name}' in runs:
+            checks += condition_targets(name, runs[f'cond_{name}'], runs)
     floor = runs.get('floor_run')
     if floor:
         target('floor_run latency TRACKING p95, s', _get(floor, 'latency', 'tracking_p95'),

@@ -22,6 +22,11 @@ starts from a fresh process with ``OPENBLAS_NUM_THREADS=1``:
   missing, their databases built into ``--out``), checked against the real-cameras
   issue's targets (95 % posed, median 2 cm, p95 8 cm, heading median 0.5 deg, no pose
   50 cm off; the pinhole's TRACKING p95 on one core at most 12 ms);
+- with ``--conditions NAME,...`` (or ``all``): the real-cameras issue's other rows
+  (:mod:`landmark_localizer.bench.conditions`: a panorama pitched 2 degrees against the
+  level one, a run shaking 0.5 degrees, a run camera 5 cm higher, a 1280 x 960 pinhole
+  run on the 640 x 480 database, the 25 cm floor through the lens cameras), their bags
+  rendered into ``--cache`` and their databases built into ``--out`` if missing;
 - the baseline (:mod:`landmark_localizer.bench.baseline`) on ``room_run`` and on the first
   ``--baseline-frames`` frames of ``floor_run``: its figures as ratios to ours, and its
   database's size (all descriptors and keypoints) against ours (the SQLite file).
@@ -80,6 +85,11 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--cameras', default='', metavar='CAMERA,...',
                         help='also the lens rooms: pinhole, fisheye or both, comma separated '
                              '(rendered into --cache if missing)')
+    parser.add_argument('--conditions', default='', metavar='NAME,...',
+                        help='also the real-cameras conditions: level, pitch2, vibration, '
+                             'height, hires, floor_pinhole, floor_fisheye, comma separated, '
+                             'or all (rendered into --cache if missing; the floor ones take '
+                             'an hour each on two cores)')
     parser.add_argument('--set', dest='settings', action='append', default=[],
                         metavar='NAME=VALUE', help='localizer setting (repeatable)')
     parser.set_defaults(func=run)
@@ -159,6 +169,8 @@ def run(args: argparse.Namespace) -> int:
     runs['room_run_effects'] = _localize('room_run_effects', room_db, effects, out, log, args)
     for camera in _cameras(args.cameras):
         runs[f'room_run_{camera}'] = _lens_run(camera, cache, out, log, args)
+    for name in _conditions(args.conditions):
+        runs[f'cond_{name}'] = _condition_run(name, room_db, cache, out, log, args)
     floor_db = None
     if not args.skip_floor:
         for needed in (cache / 'floor_exploration', cache / 'floor_run'):
@@ -192,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _cameras(text: str) -> list[str]:
-    from landmark_localizer.cli.demo import LENS_BAGS
+    from landmark_localizer.bench.conditions import LENS_BAGS
     from landmark_localizer.errors import LocalizerError
 
     cameras = [c.strip() for c in text.split(',') if c.strip()]
@@ -203,17 +215,65 @@ def _cameras(text: str) -> list[str]:
     return cameras
 
 
+def _rendered(bag: Path, argv: list[str] | tuple[str, ...], log: Path) -> Path:
+    """Return ``bag``, rendering it with ``vbn render`` ARGV first if it is missing."""
+    if not (bag / 'metadata.yaml').is_file():
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        if bag.exists():
+            import shutil
+
+            shutil.rmtree(bag)  # a render that did not finish
+        _call([*argv, '--out', str(bag)], log)
+    return bag
+
+
+def _lens_database(camera: str, cache: Path, out: Path, log: Path,
+                   args: argparse.Namespace) -> Path:
+    """Return the lens room's database of ``camera``, rendering and building if missing."""
+    from landmark_localizer.bench.conditions import lens_render_argv
+
+    bag = _rendered(cache / f'room_exploration_{camera}_lens',
+                    lens_render_argv(camera, 'exploration'), log)
+    return _database(out / f'room_{camera}.db', bag, args.build_set, log)
+
+
 def _lens_run(camera: str, cache: Path, out: Path, log: Path, args: argparse.Namespace
               ) -> dict[str, Any]:
     """Localize the lens room of ``camera``, rendering and building what is missing."""
-    from landmark_localizer.cli.demo import lens_render_argv
+    from landmark_localizer.bench.conditions import lens_render_argv
 
-    cache.mkdir(parents=True, exist_ok=True)
-    bags = {}
-    for kind in ('exploration', 'run'):
-        bag = cache / f'room_{kind}_{camera}_lens'
-        if not (bag / 'metadata.yaml').is_file():
-            _call(lens_render_argv(camera, kind) + ['--out', str(bag)], log)
-        bags[kind] = bag
-    db = _database(out / f'room_{camera}.db', bags['exploration'], args.build_set, log)
-    return _localize(f'room_run_{camera}', db, bags['run'], out, log, args)
+    db = _lens_database(camera, cache, out, log, args)
+    run = _rendered(cache / f'room_run_{camera}_lens', lens_render_argv(camera, 'run'), log)
+    return _localize(f'room_run_{camera}', db, run, out, log, args)
+
+
+def _conditions(text: str) -> list[str]:
+    from landmark_localizer.bench.conditions import CONDITIONS
+    from landmark_localizer.errors import LocalizerError
+
+    names = list(CONDITIONS) if text.strip() == 'all' else \
+        [c.strip() for c in text.split(',') if c.strip()]
+    unknown = sorted(set(names) - set(CONDITIONS))
+    if unknown:
+        raise LocalizerError(f'--conditions: unknown condition {unknown[0]!r} (expected all '
+                             f'or {", ".join(CONDITIONS)})')
+    if 'pitch2' in names and 'level' not in names:
+        names.insert(names.index('pitch2'), 'level')  # its reference
+    return names
+
+
+def _condition_run(name: str, room_db: Path, cache: Path, out: Path, log: Path,
+                   args: argparse.Namespace) -> dict[str, Any]:
+    """Localize one condition's run, rendering and building what is missing."""
+    from landmark_localizer.bench.conditions import CONDITIONS, LENS_BAGS
+
+    condition = CONDITIONS[name]
+    if condition.database == 'room':
+        db = room_db
+    elif condition.database in LENS_BAGS:
+        db = _lens_database(condition.database, cache, out, log, args)
+    else:
+        bag = _rendered(cache / condition.database, condition.exploration, log)
+        db = _database(out / f'{condition.database}.db', bag, args.build_set, log)
+    run = _rendered(cache / condition.run_bag, condition.run, log)
+    return _localize(f'cond_{name}', db, run, out, log, args)

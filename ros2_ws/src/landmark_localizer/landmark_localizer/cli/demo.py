@@ -45,6 +45,7 @@ import sys
 import time
 from typing import Any
 
+from landmark_localizer.bench.conditions import LENS_BAGS, LENS_HEADINGS, lens_render_argv
 from vbn_common import names
 
 __all__ = ['LENS_BAGS', 'LENS_HEADINGS', 'lens_render_argv', 'register', 'run']
@@ -55,14 +56,6 @@ DEMO_BUILD_SETTINGS: tuple[str, ...] = ()
 #: What the demo records of the node (and the ground truth that the player publishes).
 RECORDED_TOPICS = (names.LOCALIZER_POSE, names.LOCALIZER_POSE_WITH_COVARIANCE,
                    names.LOCALIZER_REGION, names.GROUND_TRUTH_POSE, names.DIAGNOSTICS)
-#: ``vbn render`` settings of the demo's lens cameras (the real-cameras issue's rows).
-LENS_BAGS: dict[str, tuple[str, ...]] = {
-    'pinhole': ('--camera', 'pinhole', '--distortion', 'plumb_bob:-0.3,0.08,0.0005,-0.0005,0'),
-    'fisheye': ('--camera', 'fisheye', '--hfov', '180',
-                '--distortion', 'equidistant:0.02,-0.005,0.001,0'),
-}
-#: Headings per position of the lens cameras' explorations.
-LENS_HEADINGS = 8
 #: What the demo plays of the run bag (those the bag has).
 PLAYED_TOPICS = (*names.IMAGE_TOPICS, names.CAMERA_INFO, names.ODOM, names.GROUND_TRUTH_POSE)
 
@@ -223,18 +216,6 @@ def run(args: argparse.Namespace) -> int:
     print(f'(demo took {time.perf_counter() - start:.0f} s)')
     print('PASS' if passed else 'FAIL', flush=True)
     return 0 if passed else 1
-
-
-def lens_render_argv(camera: str, kind: str) -> list[str]:
-    """Return ``vbn render``'s arguments (without ``--out``) of a lens room's bag.
-
-    Args:
-        camera: ``pinhole`` or ``fisheye`` (:data:`LENS_BAGS`).
-        kind: ``exploration`` (:data:`LENS_HEADINGS` headings per position) or ``run``.
-    """
-    extra = ['--kind', 'exploration', '--headings', str(LENS_HEADINGS)] \
-        if kind == 'exploration' else ['--kind', kind]
-    return ['render', '--scene', 'room', *extra, *LENS_BAGS[camera], '--compressed']
 
 
 def _bags(args: argparse.Namespace, out: Path, env: dict[str, str]) -> None:
