@@ -36,7 +36,7 @@ from vbn_common.geometry.camera import CameraModel
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.verification import map_rays, reprojection_error
 
-__all__ = ['PointsConfig', 'labels_by_image', 'scene_points']
+__all__ = ['PointsConfig', 'central_members', 'labels_by_image', 'scene_points']
 
 
 @dataclass(frozen=True)
@@ -88,15 +88,18 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
     """
     if not config.enabled:
         return ScenePoints.empty()
-    labels = np.concatenate([np.asarray(lab, np.int64) for lab in image_labels]) \
-        if len(image_labels) else np.zeros(0, np.int64)
-    image = np.repeat(np.arange(len(image_labels)), [len(lab) for lab in image_labels])
-    member = np.flatnonzero(labels >= 0)
-    if member.size == 0:
+    # Only the classified features, image by image: the exploration's every descriptor
+    # at once is gigabytes on a large floor.
+    rows = [np.flatnonzero(np.asarray(lab) >= 0) for lab in image_labels]
+    if not sum(len(r) for r in rows):
         return ScenePoints.empty()
-    uv = np.concatenate([f.keypoints for f in features]).astype(float)[member]
-    descriptors = np.concatenate([f.descriptors for f in features])[member]
-    labels, image = labels[member], image[member]
+    labels = np.concatenate([np.asarray(lab, np.int64)[r]
+                             for lab, r in zip(image_labels, rows, strict=True)])
+    image = np.repeat(np.arange(len(rows)), [len(r) for r in rows])
+    uv = np.concatenate([f.keypoints[r] for f, r in zip(features, rows, strict=True)]
+                        ).astype(float)
+    descriptors = np.concatenate([f.descriptors[r]
+                                  for f, r in zip(features, rows, strict=True)])
     pose = np.asarray(camera_poses, float)[image]
     rays = map_rays(camera.unproject(uv), pose[:, 2])
     centres = np.column_stack([pose[:, :2], np.zeros(len(pose))])
@@ -130,21 +133,55 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
         ~(error <= config.max_error_px)
     ok &= np.bincount(inverse, weights=bad, minlength=n) == 0
 
-    # One descriptor: the member nearest the class's mean descriptor.
-    dsum = np.zeros((n, descriptors.shape[1]))
-    np.add.at(dsum, inverse, descriptors.astype(float))
-    centre = dsum / np.maximum(views, 1)[:, None]
-    dist = np.linalg.norm(descriptors - centre[inverse], axis=1)
-    order = np.lexsort((dist, inverse))
-    first = order[np.concatenate([[True], np.diff(inverse[order]) != 0])]
-    chosen = np.full(n, -1)
-    chosen[inverse[first]] = first
+    chosen = central_members(descriptors, inverse, n)
 
     remap = np.full(int(max(ids.max(), kept.max(initial=-1))) + 1, -1, np.int64)
     remap[np.asarray(kept, np.int64)] = np.arange(len(kept))
     keep = np.flatnonzero(ok)
     return ScenePoints(points[keep], remap[ids[keep]], descriptors[chosen[keep]],
                        views[keep])
+
+
+def central_members(descriptors: np.ndarray, group: np.ndarray, n: int,
+                    chunk: int = 1 << 18) -> np.ndarray:
+    """Return the member of each group nearest the group's mean descriptor.
+
+    In chunks of ``chunk`` members, in float32: a whole floor's members in float64 were
+    tens of gigabytes (a 19,344-image pinhole floor was killed for memory here).
+
+    Args:
+        descriptors: ``(m, d)`` the members' descriptors (any numeric type).
+        group: ``(m,)`` each member's group, in ``[0, n)``.
+        n: number of groups.
+        chunk: members per chunk.
+
+    Returns:
+        ``(n,)`` the row of each group's central member, -1 for an empty group.
+
+    Example:
+        >>> central_members(np.array([[0], [4], [5], [9]]), np.array([0, 0, 0, 1]), 3).tolist()
+        [1, 3, -1]
+    """
+    order = np.argsort(group, kind='stable')
+    sorted_group = group[order]
+    total = np.zeros((n, descriptors.shape[1]), np.float64)
+    for start in range(0, len(order), chunk):
+        rows, g = order[start:start + chunk], sorted_group[start:start + chunk]
+        first = np.flatnonzero(np.concatenate([[True], g[1:] != g[:-1]]))
+        total[g[first]] += np.add.reduceat(descriptors[rows].astype(np.float32), first,
+                                           axis=0)
+    centre = (total / np.maximum(np.bincount(group, minlength=n), 1)[:, None]
+              ).astype(np.float32)
+    dist = np.empty(len(order), np.float32)
+    for start in range(0, len(order), chunk):
+        rows, g = order[start:start + chunk], sorted_group[start:start + chunk]
+        dist[start:start + len(rows)] = np.linalg.norm(
+            descriptors[rows].astype(np.float32) - centre[g], axis=1)
+    best = np.lexsort((dist, sorted_group))   # sorted_group is sorted: ties by distance
+    head = best[np.concatenate([[True], sorted_group[best][1:] != sorted_group[best][:-1]])]
+    chosen = np.full(n, -1, np.int64)
+    chosen[sorted_group[head]] = order[head]
+    return chosen
 
 
 def labels_by_image(frames_of_pose: Sequence[Sequence[int]], pose_labels: Sequence[np.ndarray],
