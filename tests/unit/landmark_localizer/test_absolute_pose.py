@@ -363,3 +363,35 @@ def test_residuals_are_judged_at_the_coarser_cameras_pixels() -> None:
     assert index.residual_focal == pytest.approx(pixels_per_radian(CAMERA))
     index.frame_camera = PanoramicCamera(CAMERA.width // 2, CAMERA.height // 2)
     assert index.residual_focal == pytest.approx(pixels_per_radian(CAMERA) / 2)
+
+
+def test_a_finer_run_camera_is_judged_at_the_database_pixels() -> None:
+    """A run camera of twice the database's resolution, with the database's noise.
+
+    Every keypoint 2 database pixels left or right (4 of the run camera's, which no planar
+    pose explains): judged at the run camera's pixels (3 px) every point would be an
+    outlier and the seed would stay; at the coarser camera's
+    (:attr:`DatabaseIndex.residual_focal`) they are inliers and polish it.
+    """
+    from localizer_samples import CAMERA, HEIGHT
+
+    from landmark_localizer.absolute_pose import refine_on_points
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.camera import PanoramicCamera
+    from vbn_common.geometry.frames import world_points_to_camera
+    from vbn_common.geometry.localize import PoseEstimate
+
+    points, index = _world()
+    fine = PanoramicCamera(2 * CAMERA.width, 2 * CAMERA.height)
+    index.frame_camera = fine
+    truth = np.array([2.0, 1.4, -0.3])
+    uv, ok = fine.project(world_points_to_camera(truth, HEIGHT, points))
+    ids = np.flatnonzero(ok)
+    signs = np.random.default_rng(9).choice([-1.0, 1.0], len(ids))
+    uv = uv[ids] + np.column_stack([4.0 * signs, np.zeros(len(ids))])
+    seed = PoseSolution(PoseEstimate(*(truth + [0.03, -0.02, 0.005]), np.eye(3) * 1e-4,
+                                     0.5, 0.0, 2, True), ids, 2, len(ids), 0.3)
+    found = refine_on_points(index, ids, uv, seed, LocalizerConfig())
+    assert found is not None and found is not seed
+    assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01

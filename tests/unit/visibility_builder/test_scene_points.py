@@ -28,7 +28,7 @@ def test_the_central_member_by_hand() -> None:
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
-@given(st.integers(0, 2**32 - 1), st.integers(1, 300), st.integers(1, 40),
+@given(st.integers(0, 2**32 - 1), st.integers(0, 300), st.integers(1, 40),
        st.integers(1, 64))
 def test_chunks_give_the_same_choice_as_all_at_once(seed: int, m: int, n: int,
                                                     chunk: int) -> None:

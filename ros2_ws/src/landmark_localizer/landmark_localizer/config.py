@@ -33,7 +33,8 @@ class LocalizerConfig:
         vote_candidates: candidate regions verified geometrically, most votes first.
         verify_ratio: ratio test when matching the current image to a model view.
         min_inliers: least correspondences a model view must keep in a pose solve.
-        max_residual_px: largest RMS epipolar error of a model view's solve, pixels.
+        max_residual_px: largest RMS epipolar error of a model view's solve, pixels (of
+            the coarser of the database's and the frame's camera, as every threshold).
         min_tracked: fewer region features tracked than this means the features are
             lost (the thesis's "the expected k features are not all visible").
         lk_window: Lucas-Kanade window, pixels (odd).
@@ -72,7 +73,8 @@ class LocalizerConfig:
             a recent pose to check it against); 0 disables it.
         absolute_ratio: Lowe's ratio of those matches.
         absolute_threshold_px: their inlier threshold, pixels.
-        absolute_min_spread_deg: least spread of the inliers' bearings, degrees.
+        absolute_min_spread_deg: least spread of the inliers' bearings, degrees (a
+            tracked pose refined with the motion prior does not need it).
         absolute_prior_s: a pose at most this old (carried by the motion) bounds the
             absolute pose to ``max_jump_m`` from it.
         motion_prior_m: standard deviation of the predicted camera position in the

@@ -27,7 +27,7 @@ import math
 from typing import Any
 
 __all__ = ['CONDITIONS', 'LENS_BAGS', 'LENS_HEADINGS', 'LENS_TRACKING_P95_S', 'Condition',
-           'condition_targets', 'lens_render_argv']
+           'condition_targets', 'lens_render_argv', 'lens_targets']
 
 #: The real-cameras issue's TRACKING latency target for a pinhole camera, one core.
 LENS_TRACKING_P95_S = 0.012
@@ -131,17 +131,18 @@ def condition_targets(name: str, fig: dict[str, Any], runs: dict[str, dict[str, 
     Returns:
         ``(label, measured, limit, at_most)`` rows.
     """
-    from landmark_localizer.bench.demo import LENS_MAX_ERROR_M, LENS_TARGETS
+    from landmark_localizer.bench.demo import LENS_MAX_ERROR_M
 
     acc = _accuracy(fig)
     row = f'cond_{name}'
     checks = [(f'{row} largest translation error, m', acc.get('translation_max_m', math.nan),
                LENS_MAX_ERROR_M, True)]
-    if name == 'pitch2' and 'cond_level' in runs:
-        level = _accuracy(runs['cond_level'])
+    if name == 'pitch2':
+        level = _accuracy(runs.get('cond_level') or {})
         for key, label in (('translation_median_m', 'median'), ('translation_p95_m', 'p95')):
-            checks.append((f'{row} translation {label} / level', acc.get(key, math.nan)
-                           / level.get(key, math.nan), PITCH_RATIO, True))
+            reference = level.get(key) or math.nan   # no level run (or 0): NaN, FAIL
+            checks.append((f'{row} translation {label} / level',
+                           acc.get(key, math.nan) / reference, PITCH_RATIO, True))
     elif name == 'vibration':
         checks.append((f'{row} translation p95 (evo), m', acc.get('translation_p95_m',
                                                                   math.nan),
@@ -153,14 +154,39 @@ def condition_targets(name: str, fig: dict[str, Any], runs: dict[str, dict[str, 
         checks.append((f'{row} availability', fig['availability'], HEIGHT_AVAILABILITY,
                        False))
     elif name == 'hires' or name.startswith('floor_'):
-        for key, label in (('translation_median_m', 'translation median (evo), m'),
-                           ('translation_p95_m', 'translation p95 (evo), m'),
-                           ('heading_median_deg', 'heading median, deg')):
-            checks.append((f'{row} {label}', acc.get(key, math.nan), LENS_TARGETS[key], True))
-        checks.append((f'{row} availability', fig['availability'],
-                       LENS_TARGETS['availability'], False))
-        if name == 'floor_pinhole':  # the latency target is the 640 x 480 camera's
-            cpu = (fig.get('cpu_latency') or {}).get('tracking_p95')
-            checks.append((f'{row} CPU time TRACKING p95, s',
-                           math.nan if cpu is None else float(cpu), LENS_TRACKING_P95_S, True))
+        checks = lens_targets(row, fig, latency=name == 'floor_pinhole')
+    return checks
+
+
+def lens_targets(row: str, fig: dict[str, Any], latency: bool
+                 ) -> list[tuple[str, float, float, bool]]:
+    """Return the lens room's targets of a run (and the pinhole's latency, if asked).
+
+    Args:
+        row: The run's name in the table.
+        fig: Its ``vbn localize --json`` figures.
+        latency: Also TRACKING p95 on one core (wall clock and CPU time), the
+            640 x 480 pinhole's target.
+
+    Returns:
+        ``(label, measured, limit, at_most)`` rows.
+    """
+    from landmark_localizer.bench.demo import LENS_MAX_ERROR_M, LENS_TARGETS
+
+    acc = _accuracy(fig)
+    checks = [(f'{row} {label}', acc.get(key, math.nan), LENS_TARGETS[key], True)
+              for key, label in (('translation_median_m', 'translation median (evo), m'),
+                                 ('translation_p95_m', 'translation p95 (evo), m'),
+                                 ('heading_median_deg', 'heading median, deg'))]
+    checks.append((f'{row} largest translation error, m', acc.get('translation_max_m',
+                                                                  math.nan),
+                   LENS_MAX_ERROR_M, True))
+    checks.append((f'{row} availability', fig['availability'], LENS_TARGETS['availability'],
+                   False))
+    if latency:
+        for key, label in (('latency', 'latency'), ('cpu_latency', 'CPU time')):
+            value = (fig.get(key) or {}).get('tracking_p95')
+            checks.append((f'{row} {label} TRACKING p95, s',
+                           math.nan if value is None else float(value), LENS_TRACKING_P95_S,
+                           True))
     return checks

@@ -3,7 +3,9 @@
 :func:`report` formats the ``vbn localize --json`` figures of the benchmark's runs as
 one Markdown table, checks the localizer issue's targets (room runs: accuracy,
 availability, switching, latency on one core; floor run: latency, and its TRACKING
-latency against the room's) and adds the baseline's figures as ratios to ours.
+latency against the room's) and the real-cameras issue's (the lens rooms and the
+conditions of :mod:`landmark_localizer.bench.conditions`), and adds the baseline's
+figures as ratios to ours.
 """
 from __future__ import annotations
 
@@ -11,11 +13,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from landmark_localizer.bench.conditions import (
-    CONDITIONS,
-    LENS_TRACKING_P95_S,
-    condition_targets,
-)
+from landmark_localizer.bench.conditions import CONDITIONS, condition_targets, lens_targets
 
 __all__ = ['report']
 
@@ -116,26 +114,9 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
             target(f'{name} region changes by prediction',
                    _get(fig, 'changes', 'predicted_fraction'), t.predicted_fraction, False)
     for camera in ('pinhole', 'fisheye'):
-        fig = runs.get(f'room_run_{camera}')
-        if not fig:
-            continue
-        from landmark_localizer.bench.demo import LENS_MAX_ERROR_M, LENS_TARGETS
-
-        name = f'room_run_{camera}'
-        acc = _accuracy(fig) or {}
-        for key, label in (('translation_median_m', 'translation median (evo), m'),
-                           ('translation_p95_m', 'translation p95 (evo), m'),
-                           ('heading_median_deg', 'heading median, deg')):
-            target(f'{name} {label}', acc.get(key, math.nan), LENS_TARGETS[key])
-        target(f'{name} largest translation error, m', acc.get('translation_max_m', math.nan),
-               LENS_MAX_ERROR_M)
-        target(f'{name} availability', fig['availability'], LENS_TARGETS['availability'],
-               False)
-        if camera == 'pinhole':
-            target(f'{name} latency TRACKING p95, s', _get(fig, 'latency', 'tracking_p95'),
-                   LENS_TRACKING_P95_S)
-            target(f'{name} CPU time TRACKING p95, s',
-                   _get(fig, 'cpu_latency', 'tracking_p95'), LENS_TRACKING_P95_S)
+        if runs.get(f'room_run_{camera}'):
+            checks += lens_targets(f'room_run_{camera}', runs[f'room_run_{camera}'],
+                                   latency=camera == 'pinhole')
     for name in CONDITIONS:
         if f'cond_{name}' in runs:
             checks += condition_targets(name, runs[f'cond_{name}'], runs)

@@ -156,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(exist_ok=True)
     log = out / 'bench.log'
     bags, cache = Path(args.bags), Path(args.cache)
+    cameras, conditions = _cameras(args.cameras), _conditions(args.conditions)  # typos first
     room_db = _database(Path(args.room_db) if args.room_db else out / 'room.db',
                         bags / 'room_exploration', args.build_set, log)
     effects = cache / 'room_run_effects'
@@ -167,9 +168,9 @@ def run(args: argparse.Namespace) -> int:
     runs['room_run_kidnapped'] = _localize('room_run_kidnapped', room_db,
                                            bags / 'room_run_kidnapped', out, log, args)
     runs['room_run_effects'] = _localize('room_run_effects', room_db, effects, out, log, args)
-    for camera in _cameras(args.cameras):
+    for camera in cameras:
         runs[f'room_run_{camera}'] = _lens_run(camera, cache, out, log, args)
-    for name in _conditions(args.conditions):
+    for name in conditions:
         runs[f'cond_{name}'] = _condition_run(name, room_db, cache, out, log, args)
     floor_db = None
     if not args.skip_floor:
@@ -266,6 +267,7 @@ def _condition_run(name: str, room_db: Path, cache: Path, out: Path, log: Path,
                    args: argparse.Namespace) -> dict[str, Any]:
     """Localize one condition's run, rendering and building what is missing."""
     from landmark_localizer.bench.conditions import CONDITIONS, LENS_BAGS
+    from landmark_localizer.errors import LocalizerError
 
     condition = CONDITIONS[name]
     if condition.database == 'room':
@@ -273,6 +275,9 @@ def _condition_run(name: str, room_db: Path, cache: Path, out: Path, log: Path,
     elif condition.database in LENS_BAGS:
         db = _lens_database(condition.database, cache, out, log, args)
     else:
+        if not condition.exploration:
+            raise LocalizerError(f'condition {name}: database {condition.database!r} has no '
+                                 'exploration to render')
         bag = _rendered(cache / condition.database, condition.exploration, log)
         db = _database(out / f'{condition.database}.db', bag, args.build_set, log)
     run = _rendered(cache / condition.run_bag, condition.run, log)

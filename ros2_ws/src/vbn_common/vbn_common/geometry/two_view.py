@@ -81,7 +81,9 @@ def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: Camera
     """Estimate the motion from a model view to the current view from matched pixels.
 
     Converts pixels to rays with ``camera`` (the same model for both views) and
-    pixel thresholds to angles with its focal length, then calls the method:
+    pixel thresholds to angles with its focal length (the coarser of the two cameras'
+    when ``current_camera`` is given: a residual carries both views' noise), then
+    calls the method:
     ``camera.kind`` picks it (``'panoramic'`` -> :func:`panoramic_planar_motion`,
     ``'pinhole'`` -> :func:`pinhole_planar_essential`) unless ``method`` names one of
     :data:`METHODS`.
@@ -114,6 +116,8 @@ def relative_motion(uv_model: np.ndarray, uv_current: np.ndarray, camera: Camera
     rays_model = camera.unproject(uv_model)
     rays_current = (current_camera or camera).unproject(uv_current)
     f = pixels_per_radian(camera)
+    if current_camera is not None:
+        f = min(f, pixels_per_radian(current_camera))
     common = {'threshold': config.threshold_px / f, 'noise_floor': config.noise_floor_px / f,
               'min_parallax': config.min_parallax_px / f,
               'min_parallax_ratio': config.min_parallax_ratio, 'rng': rng}
