@@ -88,8 +88,8 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--conditions', default='', metavar='NAME,...',
                         help='also the real-cameras conditions: level, pitch2, vibration, '
                              'height, hires, floor_pinhole, floor_fisheye, comma separated, '
-                             'or all (rendered into --cache if missing; the floor ones take '
-                             'an hour each on two cores)')
+                             'or all (rendered into --cache if missing; each floor one takes '
+                             'half an hour or more and 16 GB to render and build)')
     parser.add_argument('--set', dest='settings', action='append', default=[],
                         metavar='NAME=VALUE', help='localizer setting (repeatable)')
     parser.set_defaults(func=run)
