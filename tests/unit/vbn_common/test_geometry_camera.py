@@ -198,3 +198,13 @@ def test_panorama_projects_the_seam_into_the_image():
     # the last half pixel before the seam is column 0's left half
     uv, inside = camera.project(camera.unproject(np.array([[511.75, 64.0]])))
     assert inside.all() and uv[0, 0] == pytest.approx(-0.25)
+
+
+@pytest.mark.parametrize('camera, hfov', [('pinhole', 90.0), ('pinhole', 60.0),
+                                          ('fisheye', 180.0), ('fisheye', 200.0)])
+def test_horizontal_fov_of_the_camera_models(camera: str, hfov: float) -> None:
+    from vbn_common.geometry.camera import horizontal_fov, make_camera
+
+    model = make_camera(camera, 640, 480, hfov_deg=hfov)
+    assert math.degrees(horizontal_fov(model)) == pytest.approx(hfov, abs=1e-6)
+    assert horizontal_fov(make_camera('panoramic', 640, 120)) == pytest.approx(2 * math.pi)

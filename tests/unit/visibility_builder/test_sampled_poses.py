@@ -306,17 +306,6 @@ def test_turning_edges_join_neighbouring_sectors_by_the_sector_width_rule(
     assert_well_formed(sampling)
 
 
-@pytest.mark.parametrize('camera, hfov', [('pinhole', 90.0), ('pinhole', 60.0),
-                                          ('fisheye', 180.0), ('fisheye', 200.0)])
-def test_horizontal_fov_of_the_camera_models(camera: str, hfov: float) -> None:
-    from vbn_common.geometry.camera import make_camera
-    from visibility_builder.sampled_poses import horizontal_fov
-
-    model = make_camera(camera, 640, 480, hfov_deg=hfov)
-    assert math.degrees(horizontal_fov(model)) == pytest.approx(hfov, abs=1e-6)
-    assert horizontal_fov(make_camera('panoramic', 640, 120)) == pytest.approx(2 * math.pi)
-
-
 def test_turns_setting_is_checked() -> None:
     with pytest.raises(VisibilityBuilderError, match='turns'):
         SamplingConfig(turns='sometimes')

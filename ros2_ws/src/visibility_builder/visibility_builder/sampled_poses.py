@@ -75,10 +75,10 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from vbn_common.geometry.camera import camera_from_info
+from vbn_common.geometry.camera import camera_from_info, horizontal_fov
 from visibility_builder.errors import VisibilityBuilderError
 
-__all__ = ['PoseSampling', 'SamplingConfig', 'horizontal_fov', 'sample_poses']
+__all__ = ['PoseSampling', 'SamplingConfig', 'sample_poses']
 
 _LOG = logging.getLogger(__name__)
 
@@ -257,19 +257,6 @@ def sample_poses(exploration: Any, config: SamplingConfig | None = None,
         return _position_poses(base, camera, labels, config)
     turns = _join_turns(exploration, headings, rho, config)
     return _heading_poses(base, camera, labels, headings, turns, config)
-
-
-def horizontal_fov(camera: Any) -> float:
-    """Return a camera model's horizontal field of view through its principal point, radians.
-
-    The bearings of the outer edges of the first and last columns on the principal
-    point's row; a panorama's is ``2 pi``.
-    """
-    if getattr(camera, 'kind', '') == 'panoramic':
-        return 2.0 * math.pi
-    row = float(camera.cy)
-    bearing, _ = camera.pixel_to_bearing(np.array([[-0.5, row], [camera.width - 0.5, row]]))
-    return float(np.mod(bearing[0] - bearing[1], 2.0 * np.pi))
 
 
 def _join_turns(exploration: Any, headings: int, rho: int, config: SamplingConfig) -> bool:

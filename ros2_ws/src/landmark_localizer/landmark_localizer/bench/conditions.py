@@ -133,8 +133,10 @@ def condition_targets(name: str, fig: dict[str, Any], runs: dict[str, dict[str, 
     """
     from landmark_localizer.bench.demo import LENS_MAX_ERROR_M
 
-    acc = _accuracy(fig)
     row = f'cond_{name}'
+    if name == 'hires' or name.startswith('floor_'):
+        return lens_targets(row, fig, latency=name == 'floor_pinhole')
+    acc = _accuracy(fig)
     checks = [(f'{row} largest translation error, m', acc.get('translation_max_m', math.nan),
                LENS_MAX_ERROR_M, True)]
     if name == 'pitch2':
@@ -153,8 +155,6 @@ def condition_targets(name: str, fig: dict[str, Any], runs: dict[str, dict[str, 
                        HEIGHT_P95_M, True))
         checks.append((f'{row} availability', fig['availability'], HEIGHT_AVAILABILITY,
                        False))
-    elif name == 'hires' or name.startswith('floor_'):
-        checks = lens_targets(row, fig, latency=name == 'floor_pinhole')
     return checks
 
 

@@ -217,13 +217,13 @@ def _cameras(text: str) -> list[str]:
 
 
 def _rendered(bag: Path, argv: list[str] | tuple[str, ...], log: Path) -> Path:
-    """Return ``bag``, rendering it with ``vbn render`` ARGV first if it is missing."""
-    if not (bag / 'metadata.yaml').is_file():
-        bag.parent.mkdir(parents=True, exist_ok=True)
-        if bag.exists():
-            import shutil
+    """Return ``bag``, rendering it with ``vbn render`` ARGV first if it is missing.
 
-            shutil.rmtree(bag)  # a render that did not finish
+    ``vbn render`` writes its bag whole or not at all (a temporary folder renamed at
+    the end), so an existing folder is a finished bag.
+    """
+    if not bag.exists():
+        bag.parent.mkdir(parents=True, exist_ok=True)
         _call([*argv, '--out', str(bag)], log)
     return bag
 

@@ -67,6 +67,7 @@ __all__ = [
     'PinholeCamera',
     'camera_from_info',
     'camera_info_fields',
+    'horizontal_fov',
     'make_camera',
     'pixels_per_radian',
 ]
@@ -417,6 +418,19 @@ def pixels_per_radian(camera: CameraModel) -> float:
     The unit that turns pixel thresholds into the solvers' angles.
     """
     return float(camera.f_az if camera.kind == 'panoramic' else camera.fx)  # type: ignore
+
+
+def horizontal_fov(camera: CameraModel) -> float:
+    """Return a camera model's horizontal field of view through its principal point, radians.
+
+    The bearings of the outer edges of the first and last columns on the principal
+    point's row; a panorama's is ``2 pi``.
+    """
+    if camera.kind == 'panoramic':
+        return 2.0 * math.pi
+    row = float(camera.cy)
+    bearing, _ = camera.pixel_to_bearing(np.array([[-0.5, row], [camera.width - 0.5, row]]))
+    return float(np.mod(bearing[0] - bearing[1], 2.0 * np.pi))
 
 
 def make_camera(kind: str, width: int | None = None, height: int | None = None,
