@@ -44,6 +44,14 @@ def test_index_triangulates_the_classes_and_projects_them_back(world) -> None:
     np.testing.assert_allclose(predicted, uv, atol=1e-4)
     assert index.spacing == pytest.approx(0.5)
     assert index.regions_of_pose(index.nearest_pose([3.0, 1.5])[0]).tolist() == [0, 1]
+    dense = index.region_poses.toarray().astype(bool)
+    probe = np.arange(index.region_poses.shape[1])
+    for r in range(len(index.regions)):  # CSR slices, the same as the sparse rows
+        np.testing.assert_array_equal(index.region_contains(r, probe), dense[r])
+    view = index.regions[0].views[0]
+    rays = index.view_rays(view)
+    np.testing.assert_allclose(rays, index.camera.unproject(view.keypoints))
+    assert index.view_rays(view) is rays  # computed once
     for c in (0, 7, index.n_classes - 1):  # the same rows as a scan, in the same order
         np.testing.assert_array_equal(index.class_descriptors(c),
                                       index.descriptors[index.descriptor_class == c])

@@ -188,7 +188,7 @@ def _correspondences(index: DatabaseIndex, region: RegionData, class_ids: np.nda
         view.append(np.full(int(have.sum()), len(poses)))
         poses.append(v.pose)
         classes.append(class_ids[have])
-        model.append(index.camera.unproject(v.keypoints[rows[have]]))
+        model.append(index.view_rays(v)[rows[have]])
         current.append(rays_current[have])
     if len(poses) < 2:
         return None

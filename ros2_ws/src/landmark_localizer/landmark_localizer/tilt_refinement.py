@@ -46,18 +46,53 @@ def _levelling(pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
     is defined in the optical frame.
     """
     cp, sp, cr, sr = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
-    zero, one = np.zeros_like(cp), np.ones_like(cp)
-    rx = np.stack([np.stack([one, zero, zero], -1), np.stack([zero, cp, -sp], -1),
-                   np.stack([zero, sp, cp], -1)], -2)
-    rz = np.stack([np.stack([cr, -sr, zero], -1), np.stack([sr, cr, zero], -1),
-                   np.stack([zero, zero, one], -1)], -2)
-    return _M @ (rx @ rz) @ _M.T
+    tilt = np.zeros((len(cp), 3, 3))
+    tilt[:, 0, 0], tilt[:, 0, 1] = cr, -sr
+    tilt[:, 1, 0], tilt[:, 1, 1], tilt[:, 1, 2] = cp * sr, cp * cr, -sp
+    tilt[:, 2, 0], tilt[:, 2, 1], tilt[:, 2, 2] = sp * sr, sp * cr, cp
+    return _M @ tilt @ _M.T
 
 
 def _prior(noise: float, tilt_prior_deg: float, height_prior_m: float) -> np.ndarray:
     """Return the prior rows' weights per unknown, in units of the measurement noise."""
     tilt = 1.0 / math.radians(tilt_prior_deg)
     return np.array([0.0, 0.0, 0.0, tilt, tilt, 1.0 / height_prior_m]) * noise
+
+
+class _Problem:
+    """The state-free part of :func:`tilted_residuals`, computed once per refinement."""
+
+    def __init__(self, view_poses: np.ndarray, view: np.ndarray, rays_model: np.ndarray,
+                 rays_current: np.ndarray) -> None:
+        vp = np.asarray(view_poses, float)[view]                   # (n, 3)
+        g1 = np.asarray(rays_model, float) @ _M.T                  # planar frame
+        c1, s1 = np.cos(vp[:, 2]), np.sin(vp[:, 2])
+        self.a1 = (c1 * g1[:, 0] - s1 * g1[:, 1], s1 * g1[:, 0] + c1 * g1[:, 1],
+                   g1[:, 2])                                        # world directions
+        self.g2 = np.asarray(rays_current, float) @ _M.T           # (n, 3)
+        self.vx, self.vy = vp[:, 0], vp[:, 1]
+
+    def residuals(self, states: np.ndarray) -> np.ndarray:
+        """Return the ``(m, n)`` Sampson angular errors of ``m`` states."""
+        states = np.atleast_2d(states)
+        level = _levelling(states[:, 3], states[:, 4])             # (m, 3, 3)
+        c2, s2 = np.cos(states[:, 2]), np.sin(states[:, 2])
+        turn = level.copy()                                         # R_z(yaw) @ level
+        turn[:, 0] = c2[:, None] * level[:, 0] - s2[:, None] * level[:, 1]
+        turn[:, 1] = s2[:, None] * level[:, 0] + c2[:, None] * level[:, 1]
+        a2 = np.matmul(turn, self.g2.T)                             # (m, 3, n)
+        a2x, a2y, a2z = a2[:, 0], a2[:, 1], a2[:, 2]
+        a1x, a1y, a1z = self.a1
+        bx = states[:, 0, None] - self.vx
+        by = states[:, 1, None] - self.vy
+        bz = np.broadcast_to(states[:, 5, None], bx.shape)
+        norm = np.maximum(np.sqrt(bx * bx + by * by + bz * bz), 1e-12)
+        bx, by, bz = bx / norm, by / norm, bz / norm
+        e = bx * (a1y * a2z - a1z * a2y) + by * (a1z * a2x - a1x * a2z) + \
+            bz * (a1x * a2y - a1y * a2x)
+        d1 = bx * a1x + by * a1y + bz * a1z
+        d2 = bx * a2x + by * a2y + bz * a2z
+        return e / np.sqrt(np.maximum(2.0 - d1 * d1 - d2 * d2, 1e-12))
 
 
 def tilted_residuals(states: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
@@ -72,24 +107,7 @@ def tilted_residuals(states: np.ndarray, view_poses: np.ndarray, view: np.ndarra
             mount).
         rays_current: ``(n, 3)`` optical rays of the current frame (idem).
     """
-    states = np.atleast_2d(states)
-    vp = view_poses[view]                                        # (n, 3)
-    g1 = rays_model @ _M.T                                       # planar frame, (n, 3)
-    c1, s1 = np.cos(vp[:, 2]), np.sin(vp[:, 2])
-    a1 = np.stack([c1 * g1[:, 0] - s1 * g1[:, 1], s1 * g1[:, 0] + c1 * g1[:, 1],
-                   g1[:, 2]], axis=1)                            # world directions
-    level = _levelling(states[:, 3], states[:, 4])               # (m, 3, 3)
-    g2 = np.einsum('mij,nj->mni', level, rays_current @ _M.T)    # (m, n, 3)
-    c2, s2 = np.cos(states[:, 2])[:, None], np.sin(states[:, 2])[:, None]
-    a2 = np.stack([c2 * g2[..., 0] - s2 * g2[..., 1], s2 * g2[..., 0] + c2 * g2[..., 1],
-                   g2[..., 2]], axis=-1)
-    b = np.stack([states[:, None, 0] - vp[None, :, 0], states[:, None, 1] - vp[None, :, 1],
-                  np.broadcast_to(states[:, None, 5], (len(states), len(vp)))], axis=-1)
-    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-12)
-    e = np.einsum('mnk,mnk->mn', b, np.cross(a1[None], a2))
-    d1 = np.einsum('mnk,nk->mn', b, a1)
-    d2 = np.einsum('mnk,mnk->mn', b, a2)
-    return e / np.sqrt(np.maximum(2.0 - d1 * d1 - d2 * d2, 1e-12))
+    return _Problem(view_poses, view, rays_model, rays_current).residuals(states)
 
 
 def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
@@ -117,9 +135,10 @@ def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
     """
     state = np.r_[np.asarray(initial, float)[:3], 0.0, 0.0, 0.0]
     prior = _prior(noise, tilt_prior_deg, height_prior_m)
-    args = (view_poses, view, rays_model, rays_current)
+    problem = _Problem(view_poses, view, rays_model, rays_current)
+    steps = np.diag(_STEP)
     for _ in range(iterations):
-        both = tilted_residuals(np.vstack([state, state + np.diag(_STEP)]), *args)
+        both = problem.residuals(np.vstack([state, state + steps]))
         r, jac = both[0], ((both[1:] - both[0]) / _STEP[:, None]).T
         weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
         jw = jac * weights[:, None]
@@ -132,7 +151,7 @@ def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
         state[2] = float(wrap_angle(state[2]))
         if np.abs(delta[[0, 1, 5]]).max() < 1e-4 and np.abs(delta[2:5]).max() < 1e-5:
             break
-    both = tilted_residuals(np.vstack([state, state + np.diag(_STEP)]), *args)
+    both = problem.residuals(np.vstack([state, state + steps]))
     return state, both[0], ((both[1:] - both[0]) / _STEP[:, None]).T
 
 
