@@ -4,8 +4,9 @@
 one Markdown table, checks the localizer issue's targets (room runs: accuracy,
 availability, switching, latency on one core; floor run: latency, and its TRACKING
 latency against the room's) and the real-cameras issue's (the lens rooms and the
-conditions of :mod:`landmark_localizer.bench.conditions`), and adds the baseline's
-figures as ratios to ours.
+conditions of :mod:`landmark_localizer.bench.conditions`), adds the baseline's figures
+as ratios to ours, and puts the structure-based peer beside ours with the accuracy
+issue's targets (:mod:`landmark_localizer.bench.peer_report`).
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from landmark_localizer.bench.conditions import CONDITIONS, condition_targets, lens_targets
+from landmark_localizer.bench.peer_report import peer_table, peer_targets
 
 __all__ = ['report']
 
@@ -25,6 +27,14 @@ def _get(fig: dict[str, Any], *path: str) -> float:
             return math.nan
         value = value[key]
     return float(value)
+
+
+def _db_name(fig: dict[str, Any]) -> str:
+    if fig.get('baseline'):
+        return 'full features'
+    if fig.get('peer'):
+        return f"peer map ({fig['peer']['mode']})"
+    return Path(fig['db']).name
 
 
 def _accuracy(fig: dict[str, Any]) -> dict[str, Any] | None:
@@ -54,11 +64,12 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
         frac = changes.get('predicted_fraction')
         rec = fig.get('recovery') or []
         lines.append(
-            f"| {name} | {Path(fig['db']).name if not fig.get('baseline') else 'full features'}"
+            f"| {name} | {_db_name(fig)}"
             f" | {fig['frames']} | {fig['poses']} | {fig['availability'] * 100:.1f} % | "
             + (f"{frac * 100:.0f} % ({changes['predicted']}/"
                f"{changes['predicted'] + changes['after_loss']})"
-               if frac is not None and not fig.get('baseline') else '-') + ' | '
+               if frac is not None and not (fig.get('baseline') or fig.get('peer'))
+               else '-') + ' | '
             + (f"{acc['translation_median_m'] * 100:.2f} cm | "
                f"{acc['translation_p95_m'] * 100:.2f} cm | {acc['heading_median_deg']:.3f} deg"
                if acc else '- | - | -') + ' | '
@@ -128,6 +139,7 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
                t.lost_p95_s)
         target('floor_run CPU time TRACKING p95, s',
                _get(floor, 'cpu_latency', 'tracking_p95'), t.tracking_p95_s)
+    checks += peer_targets(runs)
     lines += ['', '| target | measured | limit | |', '|---|---|---|---|']
     passed = True
     for label, value, limit, at_most in checks:
@@ -143,6 +155,7 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
     if floor:
         lines += _floor_report(floor)
     lines += _ratios(runs)
+    lines += peer_table(runs)
     lines.append('')
     lines.append('RESULT: ' + ('PASS (every target met)' if passed else 'FAIL (see FAIL rows)'))
     return '\n'.join(lines), passed

@@ -29,7 +29,12 @@ starts from a fresh process with ``OPENBLAS_NUM_THREADS=1``:
   rendered into ``--cache`` and their databases built into ``--out`` if missing;
 - the baseline (:mod:`landmark_localizer.bench.baseline`) on ``room_run`` and on the first
   ``--baseline-frames`` frames of ``floor_run``: its figures as ratios to ours, and its
-  database's size (all descriptors and keypoints) against ours (the SQLite file).
+  database's size (all descriptors and keypoints) against ours (the SQLite file);
+- the structure-based peer (:mod:`landmark_localizer.bench.peer`: SIFT tracks of the
+  same exploration triangulated with its poses, every frame's SIFT matched to them and
+  posed by pycolmap) on the same runs, both variants on ``room_run`` and the tracking
+  one elsewhere (``--skip-peer``: none): side by side with ours, with the ratios, and
+  the accuracy issue's targets on each run that has a peer.
 
 Databases that do not exist are built with ``vbn build`` (``--build-set`` passed on).
 Latency is wall-clock time per frame (decoding included) and, beside it, the process's
@@ -82,6 +87,8 @@ def register(subparsers: Any) -> None:
                         help='frames of floor_run the baseline localizes (150)')
     parser.add_argument('--skip-floor', action='store_true', help='no floor runs')
     parser.add_argument('--skip-baseline', action='store_true', help='no baseline runs')
+    parser.add_argument('--skip-peer', action='store_true',
+                        help='no runs of the structure-based peer (pycolmap)')
     parser.add_argument('--cameras', default='', metavar='CAMERA,...',
                         help='also the lens rooms: pinhole, fisheye or both, comma separated '
                              '(rendered into --cache if missing)')
@@ -125,7 +132,8 @@ def _database(path: Path, bag: Path, settings: list[str], log: Path) -> Path:
 
 
 def _localize(name: str, db: Path, bag: Path, out: Path, log: Path, args: argparse.Namespace,
-              baseline: Path | None = None, limit: int | None = None) -> dict[str, Any]:
+              baseline: Path | None = None, limit: int | None = None,
+              peer: tuple[Path, str] | None = None) -> dict[str, Any]:
     result_json = out / f'{name}.json'
     argv = ['localize', str(bag), '--db', str(db), '--out', str(out / f'{name}_poses'),
             '--overwrite', '--one-core', '--quiet', '--json', str(result_json)]
@@ -137,6 +145,9 @@ def _localize(name: str, db: Path, bag: Path, out: Path, log: Path, args: argpar
     if baseline is not None:
         argv += ['--baseline', str(baseline), '--baseline-cache',
                  str(out / f'{baseline.name}_full_features.npz')]
+    if peer is not None:
+        argv += ['--peer', str(peer[0]), '--peer-mode', peer[1], '--peer-cache',
+                 str(out / f'{peer[0].name}_peer_map.npz')]
     env = dict(os.environ, OPENBLAS_NUM_THREADS='1', OMP_NUM_THREADS='1', MKL_NUM_THREADS='1')
     start = time.perf_counter()
     _call(argv, log, env)
@@ -193,6 +204,8 @@ def run(args: argparse.Namespace) -> int:
             runs['baseline_floor_run'] = _localize(
                 'baseline_floor_run', floor_db, cache / 'floor_run', out, log, args,
                 baseline=cache / 'floor_exploration', limit=frames)
+    if not args.skip_peer:
+        _peer_runs(runs, out, log, args, bags, cache, cameras, floor_db)
     from landmark_localizer.bench.report import report
 
     table, passed = report(runs)
@@ -202,6 +215,32 @@ def run(args: argparse.Namespace) -> int:
         {name: {k: v for k, v in fig.items() if k != 'frames_detail'}
          for name, fig in runs.items()}, indent=1))
     return 0 if passed else 1
+
+
+def _peer_runs(runs: dict[str, dict[str, Any]], out: Path, log: Path,
+               args: argparse.Namespace, bags: Path, cache: Path, cameras: list[str],
+               floor_db: Path | None) -> None:
+    """Add the structure-based peer's runs beside ours (``peer_MODE_RUN``; issue 16).
+
+    Both variants on ``room_run``, the tracking one (what a user would run on a robot)
+    on the kidnapped, effects and lens runs and on the first frames of the floor run.
+    """
+    room = bags / 'room_exploration'
+    plan: list[tuple[str, Path, Path, str, int | None]] = [
+        ('room_run', room, bags / 'room_run', 'global', None),
+        ('room_run', room, bags / 'room_run', 'tracking', None),
+        ('room_run_kidnapped', room, bags / 'room_run_kidnapped', 'tracking', None),
+        ('room_run_effects', room, cache / 'room_run_effects', 'tracking', None)]
+    for camera in cameras:
+        plan.append((f'room_run_{camera}', cache / f'room_exploration_{camera}_lens',
+                     cache / f'room_run_{camera}_lens', 'tracking', None))
+    if floor_db is not None and 'floor_run_first' in runs:
+        plan.append(('floor_run_first', cache / 'floor_exploration', cache / 'floor_run',
+                     'tracking', runs['floor_run_first']['frames']))
+    for name, exploration, bag, mode, limit in plan:
+        db = Path(runs[name]['db'])
+        runs[f'peer_{mode}_{name}'] = _localize(f'peer_{mode}_{name}', db, bag, out, log,
+                                                args, limit=limit, peer=(exploration, mode))
 
 
 def _cameras(text: str) -> list[str]:

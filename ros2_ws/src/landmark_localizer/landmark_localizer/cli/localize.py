@@ -55,6 +55,19 @@ def register(subparsers: Any) -> None:
                              '(landmark_localizer.bench.baseline; --db gives the SIFT settings)')
     parser.add_argument('--baseline-cache', metavar='FILE.npz', default=None,
                         help="keep the baseline's full feature database in this file")
+    parser.add_argument('--peer', metavar='EXPLORATION_BAGDIR', default=None,
+                        help='localize with the structure-based peer instead: SIFT tracks of '
+                             'this exploration bag triangulated with its poses, every frame '
+                             'matched to them and posed by pycolmap '
+                             '(landmark_localizer.bench.peer; --db gives the SIFT settings)')
+    parser.add_argument('--peer-mode', choices=('global', 'tracking'), default='global',
+                        help="the peer's matching: every frame against the whole map, or "
+                             'near the pose the last one and the odometry predict')
+    parser.add_argument('--peer-descriptors', choices=('all', 'one'), default='all',
+                        help="the peer's map: every observation's descriptor, or one per "
+                             'point (its compact form)')
+    parser.add_argument('--peer-cache', metavar='FILE.npz', default=None,
+                        help="keep the peer's map in this file")
     parser.add_argument('--no-evo', action='store_true', help='skip the check by evo_ape')
     parser.add_argument('--json', metavar='FILE', default=None,
                         help='write the figures as JSON into FILE')
@@ -123,7 +136,23 @@ def run(args: argparse.Namespace) -> int:
         raise LocalizerError(f'--limit must be >= 1, got {args.limit}')
     config = LocalizerConfig().with_values(parse_assignments(args.settings))
     database = open_database(args.db)
-    if args.baseline:
+    if args.baseline and args.peer:
+        raise LocalizerError('--baseline and --peer are two other localizers: give one')
+    run_bag = read_run_bag(args.bag, limit=args.limit, image_topic=args.image_topic)
+    if args.peer:
+        from landmark_localizer.bench.peer import PeerConfig, PeerLocalizer
+        from landmark_localizer.bench.peer_map import build_peer_map
+        from vbn_common.features import SiftConfig
+
+        sift = SiftConfig(**{k: v for k, v in database.info.sift.items()
+                             if k in SiftConfig.__dataclass_fields__})
+        peer_map = build_peer_map(args.peer, sift, cache=args.peer_cache)
+        localizer = PeerLocalizer(
+            peer_map, check_run_camera(run_bag, peer_map.camera(), args.peer),
+            PeerConfig(mode=args.peer_mode, descriptors=args.peer_descriptors))
+        size_bytes = peer_map.nbytes if args.peer_descriptors == 'all' else \
+            peer_map.compact_nbytes
+    elif args.baseline:
         from landmark_localizer.bench.baseline import FullDatabaseLocalizer, build_full_database
         from vbn_common.features import SiftConfig
 
@@ -135,8 +164,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         localizer = Localizer(database, config)
         size_bytes = Path(args.db).stat().st_size
-    run_bag = read_run_bag(args.bag, limit=args.limit, image_topic=args.image_topic)
-    if not args.baseline:
+    if not (args.baseline or args.peer):
         localizer.index.frame_camera = check_run_camera(run_bag, localizer.index.camera,
                                                         args.db)
     pinned = use_one_core() if args.one_core else ''  # after the baseline's SIFT pool
@@ -153,7 +181,8 @@ def run(args: argparse.Namespace) -> int:
         from dataclasses import replace
 
         evaluation = replace(evaluation, evo=evo_ape(out))
-    against = f'the full feature database of {args.baseline}' if args.baseline else args.db
+    against = f'the full feature database of {args.baseline}' if args.baseline else \
+        f"the peer's map of {args.peer} ({args.peer_mode})" if args.peer else args.db
     title = (f'vbn localize: {args.bag} against {against} ({size_bytes / 1e6:.2f} MB) -> {out} '
              f'({result.wall_seconds:.1f} s, {run_bag.n_frames / result.wall_seconds:.1f} '
              f'frames/s{"; " + pinned if pinned else ""})')
@@ -161,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
     events = dict(sorted(stats.events.items())) if stats else {}
     if stats:
         print(f'  events            {events}')
-    split = {} if args.baseline else coverage_split(result, run_bag, localizer.index)
+    split = {} if args.baseline or args.peer else coverage_split(result, run_bag, localizer.index)
     for name, part in split.items():
         if part['frames']:
             print(f'  {name + " regions":17s} {part["frames"]} frames, availability '
@@ -171,6 +200,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         figures = evaluation.as_dict()
         figures.update(bag=str(args.bag), db=str(args.db), baseline=args.baseline,
+                       peer=args.peer and {'exploration': args.peer, 'mode': args.peer_mode,
+                                           'descriptors': args.peer_descriptors,
+                                           'map_bytes': peer_map.nbytes,
+                                           'compact_bytes': peer_map.compact_nbytes,
+                                           'points': len(peer_map.points)},
                        size_bytes=size_bytes, out=str(out), one_core=pinned,
                        wall_seconds=result.wall_seconds, events=events,
                        votes=stats.votes if stats else None, settings=config.as_dict(),
