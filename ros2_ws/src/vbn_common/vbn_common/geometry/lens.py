@@ -55,9 +55,14 @@ def coefficient_count(model: str) -> int:
     return MODELS[model]
 
 
+def _padded(d: np.ndarray, n: int) -> tuple[float, ...]:
+    """Return the first ``n`` coefficients, zeros after the given ones (np.pad costs more)."""
+    values = [float(v) for v in np.asarray(d, float).reshape(-1)[:n]]
+    return tuple(values + [0.0] * (n - len(values)))
+
+
 def _brown_coefficients(d: np.ndarray) -> tuple[float, ...]:
-    d = np.zeros(8) if d.size == 0 else np.pad(np.asarray(d, float), (0, max(0, 8 - d.size)))
-    return tuple(float(v) for v in d[:8])
+    return _padded(d, 8)
 
 
 def brown_distort(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -125,13 +130,13 @@ def brown_undistort(uv: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndarray:
 
 def equidistant_theta_d(theta: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Return the distorted radius ``theta_d`` of rays at ``theta`` from the axis."""
-    k1, k2, k3, k4 = (float(v) for v in np.pad(np.asarray(d, float).reshape(-1), (0, 4))[:4])
+    k1, k2, k3, k4 = _padded(d, 4)
     t2 = theta * theta
     return theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
 
 
 def _equidistant_slope(theta: np.ndarray, d: np.ndarray) -> np.ndarray:
-    k1, k2, k3, k4 = (float(v) for v in np.pad(np.asarray(d, float).reshape(-1), (0, 4))[:4])
+    k1, k2, k3, k4 = _padded(d, 4)
     t2 = theta * theta
     return 1.0 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
 
