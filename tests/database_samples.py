@@ -81,7 +81,9 @@ def sample_database(rng: np.random.Generator, nx: int = 3, ny: int = 3, n_classe
     ids = np.concatenate([named, np.full(named.size, -1)]).astype(np.int64)
     points = ScenePoints(rng.uniform(-1, 4, (ids.size, 3)), ids,
                          rng.integers(0, 256, (ids.size, 128), dtype=np.uint8),
-                         rng.integers(2, 30, ids.size))
+                         rng.integers(2, 30, ids.size),
+                         np.column_stack([rng.uniform(0, 3, (ids.size, 2)),
+                                          rng.uniform(0, 1, ids.size)]))
     return LandmarkDatabase(info, poses, classes, tuple(regions), decomposition.uncovered,
                             points)
 

@@ -365,6 +365,32 @@ def test_scene_points_round_trip_and_are_counted(db_file):
                                        points.class_ids[named])]).all()
 
 
+def test_a_schema_2_file_opens_with_where_points_were_seen_unknown(tmp_path):
+    from dataclasses import replace
+
+    from database_samples import sample_database
+
+    sample = sample_database(np.random.default_rng(0))
+    assert sample.points.has_seen_from
+    points = replace(sample.points, seen_from=None)
+    plain = replace(sample, points=points)
+    assert not points.has_seen_from and np.isnan(points.seen_from).all()
+    source = tmp_path / 'new.db'
+    write_database(source, plain)
+    old = edited_copy(source, tmp_path / 'old.db',
+                      *(f'ALTER TABLE scene_points DROP COLUMN {c}'
+                        for c in ('seen_x', 'seen_y', 'seen_radius')),
+                      'PRAGMA user_version = 2',
+                      "UPDATE meta SET value = '2' WHERE key = 'schema_version'")
+    opened = open_database(old)
+    assert opened == plain and not opened.points.has_seen_from
+    # Known for some points and not others: refused.
+    half = sample.points.seen_from.copy()
+    half[0] = np.nan
+    with pytest.raises(LandmarkDbError, match='seen_from must be known'):
+        replace(sample.points, seen_from=half)
+
+
 def test_a_schema_1_file_opens_with_no_scene_points(tmp_path):
     from dataclasses import replace
 

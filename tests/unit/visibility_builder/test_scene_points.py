@@ -1,6 +1,8 @@
 """The scene points' descriptor choice: chunked in float32, the same as all at once."""
 from __future__ import annotations
 
+import math
+
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -47,3 +49,29 @@ def test_chunks_give_the_same_choice_as_all_at_once(seed: int, m: int, n: int,
         d_got = np.linalg.norm(descriptors[got[g]] - mean)
         d_want = np.linalg.norm(descriptors[want[g]] - mean)
         assert group[got[g]] == g and abs(d_got - d_want) < 1e-3
+
+
+def test_a_point_seen_by_three_cameras_by_hand() -> None:
+    from vbn_common.features import ImageFeatures
+    from vbn_common.geometry.camera import make_camera
+    from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
+    from visibility_builder.scene_points import scene_points
+
+    camera = make_camera('panoramic')
+    point = np.array([2.0, 2.0, 0.3])
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    features, labels = [], []
+    for pose in poses:
+        optical = (point - [pose[0], pose[1], 0.0]) @ BASE_TO_CAMERA_ROTATION
+        uv, ok = camera.project(optical[None])
+        assert ok.all()
+        features.append(ImageFeatures(uv.astype(np.float32), np.ones(1, np.float32),
+                                      np.zeros(1, np.float32), np.ones(1, np.float32),
+                                      np.full((1, 128), 7, np.uint8)))
+        labels.append(np.array([0]))
+    points = scene_points(labels, features, poses, camera, np.array([0]))
+    assert points.n_points == 1 and points.views.tolist() == [3]
+    np.testing.assert_allclose(points.xyz[0], point, atol=1e-3)
+    # Seen from the centre of the three positions, the farthest sqrt(5)/3 from it.
+    np.testing.assert_allclose(points.seen_from[0], [1 / 3, 1 / 3, math.sqrt(5) / 3],
+                               atol=1e-12)

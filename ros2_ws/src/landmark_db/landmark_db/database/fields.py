@@ -66,7 +66,8 @@ def read_only(array: np.ndarray) -> np.ndarray:
 def values_equal(a: Any, b: Any) -> bool:
     if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
         return (isinstance(a, np.ndarray) and isinstance(b, np.ndarray)
-                and a.dtype == b.dtype and a.shape == b.shape and bool(np.array_equal(a, b)))
+                and a.dtype == b.dtype and a.shape == b.shape
+                and bool(np.array_equal(a, b, equal_nan=a.dtype.kind in 'fc')))
     if sp.issparse(a) or sp.issparse(b):
         return (sp.issparse(a) and sp.issparse(b) and a.shape == b.shape
                 and (a != b).nnz == 0)

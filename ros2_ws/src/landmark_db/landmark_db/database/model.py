@@ -497,6 +497,8 @@ class LandmarkDatabase(ArrayEquality):
             for array in (self.points.xyz, self.points.class_ids, self.points.descriptors,
                           self.points.views):
                 add(array)
+            if self.points.has_seen_from:  # (schema 2 files have none: their digests hold)
+                add(self.points.seen_from)
         return digest.hexdigest()
 
     def to_world_instance(self) -> WorldInstance:

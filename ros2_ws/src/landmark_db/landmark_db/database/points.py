@@ -44,12 +44,18 @@ class ScenePoints(ArrayEquality):
         descriptors: ``(n, 128)`` uint8 SIFT descriptor of each point (its member
             nearest the members' mean).
         views: ``(n,)`` int64 exploration images that saw the point (at least 2).
+        seen_from: ``(n, 3)`` float64 where the exploration saw the point from: the
+            centre ``(x, y)`` of its images' camera positions and the largest distance
+            of one of them from that centre (metres); NaN rows where unknown (a schema 2
+            file). The localizer searches a point only from near where it was seen
+            (SIFT finds a feature at the scales it was seen at; issue 16).
     """
 
     xyz: np.ndarray
     class_ids: np.ndarray
     descriptors: np.ndarray
     views: np.ndarray
+    seen_from: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         xyz = float_array(self.xyz, 'scene points', (None, 3))
@@ -57,6 +63,15 @@ class ScenePoints(ArrayEquality):
         class_ids = int_array(self.class_ids, 'scene point classes', (n,))
         descriptors = descriptor_array(self.descriptors, 'scene point descriptors')
         views = int_array(self.views, 'scene point views', (n,))
+        seen_from = np.full((n, 3), np.nan) if self.seen_from is None else \
+            np.asarray(self.seen_from, np.float64)
+        if seen_from.shape != (n, 3):
+            raise LandmarkDbError(f'scene point seen_from has shape {seen_from.shape}, '
+                                  f'expected ({n}, 3)')
+        known = np.all(np.isfinite(seen_from), axis=1)
+        if not (known.all() or not known.any()) or (known.any() and seen_from[:, 2].min() < 0):
+            raise LandmarkDbError('scene point seen_from must be known for every point or '
+                                  'none, with radii >= 0')
         if len(descriptors) != n:
             raise LandmarkDbError(f'{len(descriptors)} scene point descriptors for {n} points')
         if class_ids.size and class_ids.min() < -1:
@@ -68,8 +83,14 @@ class ScenePoints(ArrayEquality):
         if views.size and views.min() < 2:
             raise LandmarkDbError('a scene point is seen by fewer than 2 views')
         for name, value in (('xyz', xyz), ('class_ids', class_ids),
-                            ('descriptors', descriptors), ('views', views)):
+                            ('descriptors', descriptors), ('views', views),
+                            ('seen_from', seen_from)):
             set_field(self, name, value)
+
+    @property
+    def has_seen_from(self) -> bool:
+        """Whether :attr:`seen_from` is known (a schema 3 file, or a new build)."""
+        return bool(self.n_points) and bool(np.isfinite(self.seen_from).all())
 
     @property
     def n_points(self) -> int:

@@ -1,4 +1,4 @@
-"""The SQLite schema of the landmark database, version 2.
+"""The SQLite schema of the landmark database, version 3.
 
 One SQLite file holds one :class:`~landmark_db.database.model.LandmarkDatabase`. The
 file identifies itself three ways: ``PRAGMA application_id`` (:data:`APPLICATION_ID`,
@@ -36,10 +36,12 @@ region_adjacency        ``region_a < region_b, shared_poses, joining_edges``: th
                         graph, stored for a fast start-up and checked against the
                         regions when the database is opened
 uncovered               ``pose``: k-coverable poses no region covers
-scene_points            ``id, class_id, views, x, y, z, descriptor``: the triangulated
-                        scene points (:mod:`.points`), class -1 for a point the filters
-                        did not keep, a 128-byte uint8 descriptor (schema 2; a schema 1
-                        file has none and is read with no point)
+scene_points            ``id, class_id, views, x, y, z, descriptor, seen_x, seen_y,
+                        seen_radius``: the triangulated scene points (:mod:`.points`),
+                        class -1 for a point the filters did not keep, a 128-byte uint8
+                        descriptor, and where the exploration saw it from (schema 3;
+                        schema 2 has no ``seen_*`` columns and is read with them
+                        unknown; a schema 1 file has no table and is read with no point)
 ======================  ==================================================================
 
 A new column or table that old readers could ignore still bumps the version: readers
@@ -50,7 +52,7 @@ from __future__ import annotations
 __all__ = ['APPLICATION_ID', 'APPLICATION_NAME', 'REQUIRED_TABLES', 'SCHEMA_SQL',
            'SCHEMA_VERSION']
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """The schema version this code writes and the newest it reads."""
 
 APPLICATION_ID = int.from_bytes(b'VBNL', 'big')
@@ -153,7 +155,10 @@ CREATE TABLE scene_points (
     x REAL NOT NULL,
     y REAL NOT NULL,
     z REAL NOT NULL,
-    descriptor BLOB NOT NULL
+    descriptor BLOB NOT NULL,
+    seen_x REAL,
+    seen_y REAL,
+    seen_radius REAL
 );
 """
 

@@ -133,10 +133,14 @@ def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
     _insert_classes(connection, db.classes)
     _insert_regions(connection, db)
     points = db.points
-    connection.executemany('INSERT INTO scene_points VALUES (?, ?, ?, ?, ?, ?, ?)', (
-        (i, int(c), int(v), float(p[0]), float(p[1]), float(p[2]), d.tobytes())
-        for i, (c, v, p, d) in enumerate(zip(points.class_ids.tolist(), points.views.tolist(),
-                                             points.xyz, points.descriptors))))
+    seen = [None if not np.isfinite(row).all() else tuple(float(v) for v in row)
+            for row in points.seen_from]
+    connection.executemany('INSERT INTO scene_points VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)', (
+        (i, int(c), int(v), float(p[0]), float(p[1]), float(p[2]), d.tobytes(),
+         *(s if s is not None else (None, None, None)))
+        for i, (c, v, p, d, s) in enumerate(zip(points.class_ids.tolist(),
+                                                points.views.tolist(), points.xyz,
+                                                points.descriptors, seen, strict=True))))
 
 
 def _insert_build_parameters(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
@@ -519,7 +523,14 @@ def _load_points(connection: sqlite3.Connection) -> ScenePoints:
     if any(len(blob) != DESCRIPTOR_SIZE for blob in blobs):
         raise LandmarkDbError(f'a scene point descriptor is not {DESCRIPTOR_SIZE} bytes')
     descriptors = np.frombuffer(b''.join(blobs), dtype=np.uint8).reshape(-1, DESCRIPTOR_SIZE)
-    return ScenePoints(xyz, ints[:, 1], descriptors, ints[:, 2])
+    columns = {row[1] for row in connection.execute('PRAGMA table_info(scene_points)')}
+    seen = None
+    if 'seen_radius' in columns:  # schema 3
+        rows = connection.execute('SELECT seen_x, seen_y, seen_radius FROM scene_points '
+                                  'ORDER BY id').fetchall()
+        seen = np.array([[np.nan if v is None else v for v in row] for row in rows],
+                        np.float64).reshape(-1, 3)
+    return ScenePoints(xyz, ints[:, 1], descriptors, ints[:, 2], seen)
 
 
 def _load_regions(connection: sqlite3.Connection) -> tuple[RegionRecord, ...]:
