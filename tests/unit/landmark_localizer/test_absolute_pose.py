@@ -395,3 +395,47 @@ def test_a_finer_run_camera_is_judged_at_the_database_pixels() -> None:
     found = refine_on_points(index, ids, uv, seed, LocalizerConfig())
     assert found is not None and found is not seed
     assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
+
+
+def test_scene_points_around_the_camera_fix_what_a_narrow_patch_leaves_free() -> None:
+    """The narrow patch above (7 degrees), now with exact scene points all around: they
+    join the final refinement and put the pose within 2 mm without any prior; a scene
+    measurement 10 px off is left out (the pose is as good), and scene points never judge
+    the seed (a seed the patch rejects is still rejected)."""
+    from localizer_samples import HEIGHT, project, synthetic_database, wall_points
+
+    from landmark_localizer.absolute_pose import refine_on_points
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.index import DatabaseIndex
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.localize import PoseEstimate
+
+    rng = np.random.default_rng(11)
+    n = 40
+    points = np.column_stack([np.full(n, 6.0), rng.uniform(1.25, 1.75, n),
+                              rng.uniform(0.6, 2.0, n)])
+    index = DatabaseIndex(synthetic_database(rng, points))
+    truth = np.array([2.0, 1.5, 0.05])
+    uv, ok = project(truth, points)
+    ids = np.flatnonzero(ok)
+    uv = uv[ids] + rng.normal(0, 0.2, (n, 2))
+    wrong = truth + [0.2, 0.02, 0.0]
+    seed = PoseSolution(PoseEstimate(*wrong, np.eye(3) * 1e-4, 0.5, 0.0, 2, True), ids, 2,
+                        n, 0.3)
+    config = LocalizerConfig()
+    around = wall_points(np.random.default_rng(3), 60)
+    scene_uv, seen = project(truth, around)
+    xyz = around[seen] - [0.0, 0.0, HEIGHT]              # scene points: z from the camera
+    # Judged by the patch, the 20 cm seed stands (the patch cannot refuse it); polished
+    # with the scene points, it moves to the truth.
+    found = refine_on_points(index, ids, uv, seed, config, scene=(scene_uv[seen], xyz))
+    assert found is not None and found is not seed
+    assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.002
+    assert found.tilt is not None and np.abs(found.tilt).max() < 1e-3
+    off = scene_uv[seen].copy()
+    off[0] += [10.0, 0.0]
+    again = refine_on_points(index, ids, uv, seed, config, scene=(off, xyz))
+    assert np.hypot(*(again.estimate.pose[:2] - truth[:2])) < 0.002
+    far = PoseSolution(PoseEstimate(*(truth + [0.0, 0.6, 0.3]), np.eye(3) * 1e-4, 0.5, 0.0,
+                                    2, True), ids, 2, n, 0.3)
+    assert refine_on_points(index, ids, uv, far, config, scene=(scene_uv[seen], xyz)) is None

@@ -58,7 +58,7 @@ CANDIDATES = 3
 
 __all__ = ['AMBIGUITY_DISTANCE_M', 'AMBIGUITY_RATIO', 'CANDIDATES', 'CONFIDENCE', 'JUDGE_POINTS',
            'MAX_BATCHES', 'AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses',
-           'refine_absolute', 'refine_on_points', 'solve_absolute']
+           'point_errors', 'refine_absolute', 'refine_on_points', 'solve_absolute']
 
 
 @dataclass(frozen=True)
@@ -468,9 +468,35 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
     return PoseSolution(estimate, np.sort(inlier), 0, found.n_inliers, found.rms * focal)
 
 
+def point_errors(index: DatabaseIndex, state: np.ndarray, uv: np.ndarray, xyz: np.ndarray
+                 ) -> np.ndarray:
+    """(n,) angles between pixels' rays and the directions to their 3-D points.
+
+    ``state``: a planar camera pose ``(x, y, yaw)``, or ``(x, y, yaw, pitch, roll, dz)``
+    with the frame's own tilt and height offset (:func:`refine_absolute`).
+    """
+    state = np.concatenate([np.asarray(state, float), np.zeros(3)])[:6] \
+        if len(state) == 3 else np.asarray(state, float)
+    rays = base_rays(index.frame_camera.unproject(np.asarray(uv, float))) @ \
+        _tilt_rotation(state[3], state[4]).T
+    return _angular_errors(state[None, :3], rays,
+                           np.asarray(xyz, float) - np.array([0.0, 0.0, state[5]]))[0]
+
+
+def _scene_inliers(state: np.ndarray, rays: np.ndarray, xyz: np.ndarray, threshold: float
+                   ) -> np.ndarray:
+    """(n,) bool: scene measurements (rays in the level base frame) the state explains."""
+    if not len(rays):
+        return np.zeros(0, bool)
+    turned = rays @ _tilt_rotation(state[3], state[4]).T
+    return _angular_errors(state[None, :3], turned,
+                           xyz - np.array([0.0, 0.0, state[5]]))[0] <= threshold
+
+
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
                      seed: PoseSolution, config: LocalizerConfig, strict: bool = False,
-                     motion_prior: tuple[np.ndarray, np.ndarray] | None = None
+                     motion_prior: tuple[np.ndarray, np.ndarray] | None = None,
+                     scene: tuple[np.ndarray, np.ndarray] | None = None
                      ) -> PoseSolution | None:
     """Check and polish a pose solve on the tracked features' class points.
 
@@ -484,7 +510,10 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     they span less than ``absolute_min_spread_deg`` and no ``motion_prior`` holds the
     range they leave free. Thresholds are in :attr:`DatabaseIndex.residual_focal`
     pixels. ``strict`` (a vote, which no prediction
-    checks): None as well when there are too few points to judge by.
+    checks): None as well when there are too few points to judge by. ``scene``: ``(uv,
+    xyz)`` of scene points measured in the frame (:mod:`.scene_tracks`); those within
+    ``absolute_threshold_px`` of the pose the tracked features give join its final
+    refinement (they never judge the seed).
     """
     points = index.points[class_ids]
     have = np.all(np.isfinite(points), axis=1)
@@ -510,19 +539,35 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     turned = rays @ _tilt_rotation(state[3], state[4]).T
     shifted = points - np.array([0.0, 0.0, state[5]])
     first, inliers = inliers, _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
+    rays, points = rays[inliers], points[inliers]
+    scene_rays = scene_xyz = np.zeros((0, 3))
+    if scene is not None and len(scene[0]):
+        scene_rays = base_rays(index.frame_camera.unproject(np.asarray(scene[0], float)))
+        scene_xyz = np.asarray(scene[1], float)
+    near = _scene_inliers(state, scene_rays, scene_xyz, threshold)
+    all_rays = np.concatenate([rays, scene_rays[near]])
+    all_points = np.concatenate([points, scene_xyz[near]])
     # Points in a narrow cone fix their bearing, not the range: alone they cannot judge
     # the pose, but with the motion prior they can (the prior holds what they leave
     # free). Keeping the seed there kept a two-view pose 20 cm off that the points and
     # the prior together put within 1 cm (a 1280 x 960 run, 17 points within 7 deg).
-    narrow = _spread(rays[inliers]) < math.radians(config.absolute_min_spread_deg)
+    narrow = _spread(all_rays) < math.radians(config.absolute_min_spread_deg)
     if inliers.sum() < config.min_inliers or (narrow and motion_prior is None):
         return seed
-    if not np.array_equal(first, inliers):  # the same points: already refined on them
-        found = refine_absolute(state[:3], rays[inliers], points[inliers], *args)
-        if found is None:
-            return seed
+    if near.any() or not np.array_equal(first, inliers):  # else: refined on them already
+        for _ in range(2):  # scene points the refined pose brings within the threshold join
+            found = refine_absolute(state[:3], all_rays, all_points, *args)
+            if found is None:
+                return seed
+            state = found[0]
+            again = _scene_inliers(state, scene_rays, scene_xyz, threshold)
+            if np.array_equal(again, near):
+                break
+            near = again
+            all_rays = np.concatenate([rays, scene_rays[near]])
+            all_points = np.concatenate([points, scene_xyz[near]])
     state, cov = found
-    residual = np.linalg.norm(_residuals(state, rays[inliers], points[inliers]), axis=1)
+    residual = np.linalg.norm(_residuals(state, all_rays, all_points), axis=1)
     rms = float(np.sqrt(np.mean(residual ** 2)))
     cov = cov * max(rms, 0.5 / focal) ** 2
     est = seed.estimate
@@ -530,4 +575,4 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
                             0.5 * (cov + cov.T), est.ray_angle, est.residual, est.n_views,
                             est.in_front)
     return PoseSolution(estimate, seed.inlier_classes, seed.views_used, seed.inliers,
-                        seed.residual_px)
+                        seed.residual_px, state[3:].copy())

@@ -375,14 +375,23 @@ class DatabaseIndex:
 
         Pixels of :attr:`frame_camera`, the camera of the frames being localized.
         """
-        pts = self.points[class_ids]
+        return self.project_points(camera_pose, self.points[class_ids])
+
+    def project_points(self, camera_pose: np.ndarray, points: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels of 3-D points (``z`` from the camera height) from a planar camera pose.
+
+        Returns ``(uv (n, 2), valid (n,))``: NaN and False for a point that is not finite
+        or falls outside the image of :attr:`frame_camera`.
+        """
+        pts = np.asarray(points, float).reshape(-1, 3)
         ok = np.all(np.isfinite(pts), axis=1)
-        x, y, yaw = (float(v) for v in camera_pose)
+        x, y, yaw = (float(v) for v in camera_pose[:3])
         dx, dy = pts[:, 0] - x, pts[:, 1] - y
         c, s = math.cos(yaw), math.sin(yaw)
         base = np.stack([c * dx + s * dy, -s * dx + c * dy, pts[:, 2]], axis=1)
         optical = base @ BASE_TO_CAMERA_ROTATION  # p_optical = M^T p_base
-        uv = np.full((len(class_ids), 2), np.nan)
+        uv = np.full((len(pts), 2), np.nan)
         if ok.any():
             proj, valid = self.frame_camera.project(optical[ok])
             uv[ok] = proj

@@ -388,9 +388,10 @@ class Localizer:
             solution = solve_pose(self.index, region, tracks.class_ids,
                                   tracks.uv.astype(float), config, self.rng, predicted)
         if solution is not None and self.config.absolute_min_inliers > 0:
-            solution = refine_on_points(self.index, tracks.class_ids,
-                                        tracks.uv.astype(float), solution, config,
-                                        motion_prior=self._motion_prior(predicted))
+            solution = refine_on_points(
+                self.index, tracks.class_ids, tracks.uv.astype(float), solution, config,
+                motion_prior=self._motion_prior(predicted),
+                scene=self.tracker.scene.measure(image, solution.estimate.pose))
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
             if jump > config.max_jump_m:
@@ -409,6 +410,9 @@ class Localizer:
         self.camera_pose = solution.estimate.pose
         self._last_solution = solution
         self._maybe_switch(frame, region.index)
+        state = None if solution.tilt is None else np.r_[self.camera_pose, solution.tilt]
+        self.tracker.scene.update(image, self.camera_pose, state,
+                                  config.scene_window_budget - self.tracker.windows)
         return solution, len(tracks), False
 
     def _motion_prior(self, predicted: np.ndarray | None

@@ -39,6 +39,8 @@ class PoseSolution:
         views_used: Model views used (2 or 3).
         inliers: Correspondences kept, summed over the views.
         residual_px: Largest RMS epipolar error of the views, pixels.
+        tilt: ``(pitch, roll, dz)`` of the frame where a refinement on 3-D points found
+            them (:func:`~landmark_localizer.absolute_pose.refine_on_points`), else None.
     """
 
     estimate: PoseEstimate
@@ -46,6 +48,7 @@ class PoseSolution:
     views_used: int
     inliers: int
     residual_px: float
+    tilt: np.ndarray | None = None
 
 
 #: The frame's tilt and height are taken when they lower the cost to this fraction.

@@ -27,6 +27,7 @@ import numpy as np
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.matching import squared_distances
+from landmark_localizer.scene_tracks import SceneTracks
 
 __all__ = ['Tracker', 'Tracks']
 
@@ -77,11 +78,15 @@ class Tracker:
         # Per class, the frame of its last search in vain (long ago: never).
         self._searched = np.full(index.n_classes, -10**9, np.int64)
         self._reference: dict[int, np.ndarray] = {}
+        self.windows = 0  # SIFT windows searched this frame
+        # The scene points measured beside the region's features (issue 16).
+        self.scene = SceneTracks(index, config, detector)
         self.set_config(config)
 
     def set_config(self, config: LocalizerConfig) -> None:
         """Use new settings from the next frame on (windows, thresholds, cool-down)."""
         self.config = config
+        self.scene.config = config
         window = config.lk_window
         self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,
                         criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01))
@@ -90,6 +95,7 @@ class Tracker:
         """Forget every track and the previous frame."""
         self.prev_image = None
         self.tracks = Tracks()
+        self.scene.reset()
 
     def set_region(self, region: RegionData) -> None:
         """Prepare the reference descriptors of a region's classes (for re-detection)."""
@@ -124,6 +130,8 @@ class Tracker:
     def next_frame(self) -> None:
         """Count a frame (for the re-detection cool-down)."""
         self._frame += 1
+        self.windows = 0
+        self.scene.next_frame()
 
     def cooling(self, class_ids: np.ndarray) -> np.ndarray:
         """(n,) bool: classes searched in vain within the last ``redetect_cooldown`` frames."""
@@ -149,6 +157,7 @@ class Tracker:
             y0, y1 = max(0, int(v) - r), min(h, int(v) + r + 1)
             if x1 - x0 < 16 or y1 - y0 < 16:
                 continue
+            self.windows += 1
             keypoints, descriptors = self.detector.detectAndCompute(gray[y0:y1, x0:x1], None)
             if not keypoints or descriptors is None:
                 continue
