@@ -397,11 +397,14 @@ def test_a_finer_run_camera_is_judged_at_the_database_pixels() -> None:
     assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
 
 
-def test_scene_points_around_the_camera_fix_what_a_narrow_patch_leaves_free() -> None:
-    """The narrow patch above (7 degrees), now with exact scene points all around: they
-    join the final refinement and put the pose within 2 mm without any prior; a scene
-    measurement 10 px off is left out (the pose is as good), and scene points never judge
-    the seed (a seed the patch rejects is still rejected)."""
+def test_scene_points_join_the_refinement_but_never_judge_the_seed() -> None:
+    """The narrow patch above (7 degrees), now with exact scene points all around.
+
+    They never judge the seed: without a motion prior the patch cannot refuse the 20 cm
+    seed and the seed stands (the scene points are measured where the seed puts them, so
+    they would confirm it), and a seed the patch rejects is still rejected. With the
+    motion prior they join the final refinement and put the pose within 2 mm; a scene
+    measurement 10 px off is left out (the pose is as good)."""
     from localizer_samples import HEIGHT, project, synthetic_database, wall_points
 
     from landmark_localizer.absolute_pose import refine_on_points
@@ -426,15 +429,22 @@ def test_scene_points_around_the_camera_fix_what_a_narrow_patch_leaves_free() ->
     around = wall_points(np.random.default_rng(3), 60)
     scene_uv, seen = project(truth, around)
     xyz = around[seen] - [0.0, 0.0, HEIGHT]              # scene points: z from the camera
-    # Judged by the patch, the 20 cm seed stands (the patch cannot refuse it); polished
-    # with the scene points, it moves to the truth.
-    found = refine_on_points(index, ids, uv, seed, config, scene=(scene_uv[seen], xyz))
+    assert refine_on_points(index, ids, uv, seed, config,
+                            scene=(scene_uv[seen], xyz)) is seed
+    # The prior holds the range (1 cm off, 2 cm wide); the scene points polish the rest.
+    prior = (truth + [0.01, 0.0, 0.0], np.array([0.02, 0.02, math.radians(1.0)]))
+    alone = refine_on_points(index, ids, uv, seed, config, motion_prior=prior)
+    found = refine_on_points(index, ids, uv, seed, config, motion_prior=prior,
+                             scene=(scene_uv[seen], xyz))
     assert found is not None and found is not seed
     assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.002
+    assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < \
+        np.hypot(*(alone.estimate.pose[:2] - truth[:2]))
     assert found.tilt is not None and np.abs(found.tilt).max() < 1e-3
     off = scene_uv[seen].copy()
     off[0] += [10.0, 0.0]
-    again = refine_on_points(index, ids, uv, seed, config, scene=(off, xyz))
+    again = refine_on_points(index, ids, uv, seed, config, motion_prior=prior,
+                             scene=(off, xyz))
     assert np.hypot(*(again.estimate.pose[:2] - truth[:2])) < 0.002
     far = PoseSolution(PoseEstimate(*(truth + [0.0, 0.6, 0.3]), np.eye(3) * 1e-4, 0.5, 0.0,
                                     2, True), ids, 2, n, 0.3)

@@ -177,3 +177,65 @@ def test_peer_table_and_targets_by_hand() -> None:
     assert any('ours / peer tracking | - | 1.60 / 2.08 | 2.00 | 0.08 / 0.08 | 0.30' in line
                for line in lines)
     assert peer_targets({'room_run': runs['room_run']}) == []
+
+
+def _fake_exploration(monkeypatch, n_features: int) -> None:
+    """Two exploration images 0.5 m apart whose SIFT features are random (none match)."""
+    from types import SimpleNamespace
+
+    import landmark_localizer.bench.peer_map as peer_map
+    import vbn_common.exploration as exploration
+
+    camera = make_camera('panoramic', 256, 64)
+    frames = [SimpleNamespace(image=None, camera_tilt=None, base_pose=(x, 0.0, 0.0),
+                              camera_pose=(x, 0.0, 0.0)) for x in (0.0, 0.5)]
+    monkeypatch.setattr(exploration, 'read_exploration', lambda bag: SimpleNamespace(
+        frames=frames, camera_info=camera.camera_info(), camera_tilt=None))
+    rng = np.random.default_rng(3)
+    monkeypatch.setattr(peer_map, 'extract_many', lambda images, sift, workers: [
+        _Found(rng.uniform(0, 60, (n_features, 2)).astype(np.float32),
+               rng.integers(0, 255, (n_features, 128), dtype=np.uint8)) for _ in images])
+
+
+class _Found:
+    def __init__(self, keypoints: np.ndarray, descriptors: np.ndarray) -> None:
+        self.keypoints, self.descriptors = keypoints, descriptors
+
+    def __len__(self) -> int:
+        return len(self.keypoints)
+
+
+def test_a_map_with_too_few_points_is_refused(monkeypatch, tmp_path) -> None:
+    # Random descriptors match nothing: no point triangulates. FLANN's index over zero
+    # descriptors crashed the process; both the builder and the localizer refuse it.
+    from landmark_localizer.bench.peer_map import MIN_POINTS, build_peer_map
+
+    _fake_exploration(monkeypatch, 50)
+    with pytest.raises(LocalizerError, match='only 0 SIFT tracks triangulate'):
+        build_peer_map(tmp_path / 'bag', workers=1)
+    assert MIN_POINTS >= 4
+    camera = make_camera('panoramic', 256, 64)
+    with pytest.raises(LocalizerError, match='no points'):
+        PeerLocalizer(_map(np.zeros((0, 3)), camera), camera)
+
+
+def test_the_cache_key_follows_the_bag_and_the_settings(tmp_path) -> None:
+    from landmark_localizer.bench.peer_map import PeerMapConfig, source_key
+
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'a.mcap').write_bytes(b'1234')
+    key = source_key(bag, SiftConfig(), PeerMapConfig())
+    assert key == source_key(bag, SiftConfig(), PeerMapConfig())
+    assert key != source_key(bag, SiftConfig(), PeerMapConfig(ratio=0.7))
+    assert key != source_key(bag, SiftConfig(n_features=100), PeerMapConfig())
+    (bag / 'a.mcap').write_bytes(b'12345')             # the bag rebuilt
+    assert key != source_key(bag, SiftConfig(), PeerMapConfig())
+    saved = tmp_path / 'map.npz'
+    camera = make_camera('panoramic', 256, 64)
+    peer = _map(np.ones((12, 3)), camera)
+    from dataclasses import replace
+
+    from landmark_localizer.bench.peer_map import load_peer_map
+    replace(peer, source=key).save(saved)
+    assert load_peer_map(saved).source == key

@@ -10,7 +10,7 @@ import pytest
 from landmark_db.database import ScenePoints
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
-from landmark_localizer.scene_tracks import SceneTracks
+from landmark_localizer.scene_tracks import SceneTracks, scene_tracks_unavailable
 from vbn_common.features import SiftConfig
 
 SIFT = SiftConfig()
@@ -64,6 +64,13 @@ def world() -> tuple[DatabaseIndex, np.ndarray]:
     return index, xyz[found]
 
 
+def _measure_then_update(tracks: SceneTracks, image: np.ndarray, pose: np.ndarray,
+                         windows: int) -> None:
+    """One frame as the localizer runs it: measure, (the pose), prune and birth."""
+    tracks.measure(image, pose)
+    tracks.update(image, pose, None, windows=windows)
+
+
 def _tracks(index: DatabaseIndex, **settings) -> SceneTracks:
     settings.setdefault('scene_tracks', 40)   # off by default (config)
     return SceneTracks(index, LocalizerConfig(**settings), SIFT.create())
@@ -73,7 +80,7 @@ def test_born_points_are_measured_where_they_moved_to(world) -> None:
     index, xyz = world
     tracks = _tracks(index, scene_tracks=12)
     pose = np.array([3.0, 1.5, 0.2])
-    tracks.update(_image(index, pose, xyz), pose, None, windows=30)
+    _measure_then_update(tracks, _image(index, pose, xyz), pose, windows=30)
     assert len(tracks) == 12                         # the cap
     born = tracks.ids.copy()
     # The camera moves 4 cm and turns; the frame is darker (exposure).
@@ -100,7 +107,8 @@ def test_a_measurement_the_pose_rejects_is_dropped(world) -> None:
     tracks = _tracks(index, scene_tracks=8)
     pose = np.array([3.0, 1.5, 0.2])
     image = _image(index, pose, xyz)
-    tracks.update(image, pose, None, windows=20)
+    _measure_then_update(tracks, image, pose, windows=20)
+    tracks.next_frame()
     uv, points = tracks.measure(image, pose)
     assert len(uv) == len(tracks) == 8
     tracks._measured[0] += [9.0, 0.0]                # one measurement 9 px off
@@ -124,11 +132,12 @@ def test_no_windows_no_births_and_moving_away_forgets(world) -> None:
     tracks = _tracks(index, scene_max_move_m=0.1)
     pose = np.array([3.0, 1.5, 0.2])
     image = _image(index, pose, xyz)
-    tracks.update(image, pose, None, windows=0)
+    _measure_then_update(tracks, image, pose, windows=0)
     assert len(tracks) == 0
-    tracks.update(image, pose, None, windows=5)
+    _measure_then_update(tracks, image, pose, windows=5)
     assert 1 <= len(tracks) <= 5
     far = pose + [0.2, 0.0, 0.0]                      # moved 0.2 m > scene_max_move_m
+    tracks.next_frame()
     tracks.measure(_image(index, far, xyz), far)
     tracks.update(_image(index, far, xyz), far, None, windows=0)
     assert len(tracks) == 0
@@ -144,3 +153,67 @@ def test_off_without_seen_from_or_when_disabled(world) -> None:
         assert not tracks.enabled
         tracks.update(image, pose, None, windows=10)
         assert len(tracks) == 0 and len(tracks.measure(image, pose)[0]) == 0
+
+
+def test_a_frame_measured_without_points_neither_prunes_nor_births(world) -> None:
+    # absolute_min_inliers 0 (no refinement on points) or no pose: measure is not called.
+    index, xyz = world
+    tracks = _tracks(index, scene_tracks=8)
+    pose = np.array([3.0, 1.5, 0.2])
+    image = _image(index, pose, xyz)
+    tracks.update(image, pose, None, windows=20)
+    assert len(tracks) == 0                           # nothing measured: no births
+    _measure_then_update(tracks, image, pose, windows=20)
+    born = tracks.ids.copy()
+    assert len(born) == 8
+    tracks.next_frame()
+    tracks.update(image, pose, None, windows=20)      # not measured this frame
+    np.testing.assert_array_equal(tracks.ids, born)   # kept, none added
+
+
+def test_births_go_round_the_cells(world) -> None:
+    index, xyz = world
+    tracks = _tracks(index, scene_tracks=40)
+    pose = np.array([3.0, 1.5, 0.2])
+    image = _image(index, pose, xyz)
+    candidates = tracks._candidates(pose)
+    uv, ok = index.project_points(pose, index.scene_xyz[candidates])
+    w, h = index.frame_camera.width, index.frame_camera.height
+    n_cells = len(np.unique(tracks._cell(uv[ok], w, h)))
+    assert n_cells >= 6
+    _measure_then_update(tracks, image, pose, windows=6)
+    mine, _ = index.project_points(pose, index.scene_xyz[tracks.ids])
+    cells = tracks._cell(mine, w, h)
+    # Six windows on a frame whose candidates fill six or more cells: one birth a cell
+    # (every search finds its blob here).
+    assert len(tracks) == 6 and len(np.unique(cells)) == 6
+
+
+def test_search_radius_is_an_angle(world) -> None:
+    index, _ = world
+    tracks = _tracks(index)
+    f = index.frame_camera.f_az                       # the panorama's pixels per radian
+    assert tracks._pixels_per_degree == pytest.approx(f * np.pi / 180)
+
+
+def test_tracker_rebuilds_its_scene_points_when_switched_on(world) -> None:
+    from landmark_localizer.tracking import Tracker
+
+    index, _ = world
+    tracker = Tracker(index, LocalizerConfig(), SIFT.create())
+    assert not tracker.scene.enabled and not tracker.scene.unavailable
+    tracker.set_config(LocalizerConfig(scene_tracks=20))
+    assert tracker.scene.enabled
+    tracker.set_config(LocalizerConfig(scene_tracks=20, scene_patch_px=21))
+    assert tracker.scene._half == 10
+    tracker.set_config(LocalizerConfig())
+    assert not tracker.scene.enabled
+
+
+def test_a_database_without_seen_from_says_so(world) -> None:
+    index, _ = world
+    old = DatabaseIndex(replace(index.database, points=replace(index.database.points,
+                                                               seen_from=None)))
+    assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=40))
+    assert scene_tracks_unavailable(old, LocalizerConfig()) == ''
+    assert scene_tracks_unavailable(index, LocalizerConfig(scene_tracks=40)) == ''

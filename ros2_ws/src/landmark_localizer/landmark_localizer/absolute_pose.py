@@ -551,18 +551,19 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     # the pose, but with the motion prior they can (the prior holds what they leave
     # free). Keeping the seed there kept a two-view pose 20 cm off that the points and
     # the prior together put within 1 cm (a 1280 x 960 run, 17 points within 7 deg).
-    narrow = _spread(all_rays) < math.radians(config.absolute_min_spread_deg)
+    # The spread of the class points alone: the scene points never judge the seed.
+    narrow = _spread(rays) < math.radians(config.absolute_min_spread_deg)
     if inliers.sum() < config.min_inliers or (narrow and motion_prior is None):
         return seed
     if near.any() or not np.array_equal(first, inliers):  # else: refined on them already
-        for _ in range(2):  # scene points the refined pose brings within the threshold join
+        for attempt in range(2):  # scene points the refined pose brings near then join
             found = refine_absolute(state[:3], all_rays, all_points, *args)
             if found is None:
                 return seed
             state = found[0]
             again = _scene_inliers(state, scene_rays, scene_xyz, threshold)
-            if np.array_equal(again, near):
-                break
+            if attempt == 1 or np.array_equal(again, near):
+                break   # the pose and its covariance are of the points in all_rays
             near = again
             all_rays = np.concatenate([rays, scene_rays[near]])
             all_points = np.concatenate([points, scene_xyz[near]])

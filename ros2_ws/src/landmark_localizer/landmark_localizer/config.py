@@ -83,12 +83,12 @@ class LocalizerConfig:
         motion_prior_deg: ... and of its predicted heading, degrees.
         scene_tracks: scene points measured per tracked frame at most, beside the
             region's features, for the refinement on 3-D points (0, the default:
-            none; 40 about halves the median error on the rooms, for 2 to 3 ms a
+            none; 40 about halves the median error on the rooms, for about 4 ms a
             frame; :mod:`landmark_localizer.scene_tracks`).
         scene_window_budget: SIFT windows a frame may search in all; new scene points
             are searched with what the tracker left.
-        scene_search_px: a new scene point is searched within this many pixels of
-            where the pose projects it.
+        scene_search_deg: a new scene point is searched within this angle of where the
+            pose projects it, degrees (pixels: times the camera's pixels per radian).
         scene_patch_px: side of the patch a scene point is aligned by (odd), pixels.
         scene_max_move_m: a scene point is searched anew once the camera moved this
             far from where its patch was taken, metres.
@@ -133,7 +133,7 @@ class LocalizerConfig:
     motion_prior_deg: float = 1.0
     scene_tracks: int = 0
     scene_window_budget: int = 10
-    scene_search_px: float = 5.0
+    scene_search_deg: float = 1.75
     scene_patch_px: int = 31
     scene_max_move_m: float = 0.4
     seed: int = 0
@@ -166,7 +166,7 @@ class LocalizerConfig:
         if self.scene_patch_px < 11 or self.scene_patch_px % 2 == 0:
             raise LocalizerError(f'scene_patch_px must be odd and >= 11, got '
                                  f'{self.scene_patch_px}')
-        for name in ('scene_search_px', 'scene_max_move_m'):
+        for name in ('scene_search_deg', 'scene_max_move_m'):
             if getattr(self, name) <= 0:
                 raise LocalizerError(f'{name} must be > 0, got {getattr(self, name)}')
 

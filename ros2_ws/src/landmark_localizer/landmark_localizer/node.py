@@ -241,6 +241,8 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                 self.loaded = loaded
                 self.camera_key, self.camera_problem = None, ''  # re-check the CameraInfo
             loaded.localizer.set_config(config)
+        if loaded.localizer.tracker.scene.unavailable:
+            self.log.warning(f'{loaded.path}: {loaded.localizer.tracker.scene.unavailable}')
         with self.lock:
             self.odometry.max_jump_m = settings.odom_max_jump_m
         self.settings = settings
@@ -296,6 +298,8 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         self._reset_inputs()
         self._create_interfaces()
         self.log.info(f'localizer configured: {loaded.describe()}')
+        if loaded.localizer.tracker.scene.unavailable:
+            self.log.warning(f'{loaded.path}: {loaded.localizer.tracker.scene.unavailable}')
         return _SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:

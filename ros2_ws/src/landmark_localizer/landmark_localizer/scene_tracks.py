@@ -12,18 +12,26 @@ some of them in every tracked frame and hands them to the same refinement:
 - **Birth**: a scene point the exploration saw from near the current position
   (``seen_from``: within its images' spread plus ``SEEN_MARGIN_M``; SIFT finds a feature
   at the scales it was seen at), projected into the frame by the current pose, is
-  searched by SIFT in a small window (``scene_search_px``) and matched to its
-  descriptor; its pixel and a ``scene_patch_px`` square patch around it are kept.
-  Births fill the image's empty cells first, and only the SIFT windows the frame has
+  searched by SIFT in a small window (``scene_search_deg`` around it) and matched to
+  its descriptor; its pixel and a ``scene_patch_px`` square patch around it are kept.
+  Births go round the image's cells, emptiest first (a cell counts its tracked points
+  and the births this frame tries before it), and only the SIFT windows the frame has
   left (``scene_window_budget`` less those the tracker spent) are spent on them: a frame
   busy with a region change births none.
 - **Measure**: every later frame projects each point by the frame's two-view pose and
-  aligns the birth patch there (Lucas-Kanade on a mosaic of all patches, one call). A
-  fixed patch does not drift the way frame-to-frame tracking does (its pixel stays the
-  SIFT keypoint's); it ages with the viewpoint instead, so a point is born again once
-  the camera moved ``scene_max_move_m`` from its birth.
+  aligns the birth patch there (Lucas-Kanade on a mosaic of all patches, one call); an
+  alignment more than ``MAX_SHIFT_DEG`` from the prediction fails. A fixed patch does
+  not drift the way frame-to-frame tracking does (its pixel stays the SIFT keypoint's);
+  it ages with the viewpoint instead, so a point is born again once the camera moved
+  ``scene_max_move_m`` from its birth.
 - **Prune**: a point the refined pose puts more than ``absolute_threshold_px`` from its
-  measurement is dropped (and not searched for ``redetect_cooldown`` frames).
+  measurement is dropped and not searched for ``redetect_cooldown`` frames; a point not
+  measured in a frame (outside the image, or its alignment failed) is dropped too, with
+  no cool-down. A frame with no refinement on points (``absolute_min_inliers`` 0, or no
+  pose) neither prunes nor births.
+
+Angles become pixels by the frame camera's pixels per radian, so the windows mean the
+same on a panorama (163 px/rad at 1024 px) as on a 640 px pinhole of 90 deg (320).
 
 Measured in docs/localization.md, section "The structure-based peer and scene points in
 tracked frames (issue 16)".
@@ -39,15 +47,16 @@ from scipy.spatial import cKDTree
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.matching import squared_distances
+from vbn_common.geometry.camera import pixels_per_radian
 
-__all__ = ['SEEN_MARGIN_M', 'SceneTracks']
+__all__ = ['MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable']
 
 #: A point is searched from at most this far outside its exploration images' spread.
 SEEN_MARGIN_M = 0.15
 #: Grid of image cells that births fill evenly (columns, rows).
 _CELLS = (16, 4)
-#: Largest shift of a measurement from the pose's prediction, pixels.
-_MAX_SHIFT_PX = 4.0
+#: Largest shift of a measurement from the pose's prediction, degrees.
+MAX_SHIFT_DEG = 1.4
 #: The points searched from a position of the pose space: at most this many, those seen
 #: from nearest.
 _NEAREST = 400
@@ -70,15 +79,14 @@ class SceneTracks:
         self.detector = detector
         points = index.database.points
         self.enabled = config.scene_tracks > 0 and points.has_seen_from
-        seen = np.asarray(points.seen_from, float)
-        self._seen = seen
         if self.enabled:
-            self._seen_near_places()
-        self._descriptors = np.asarray(points.descriptors, np.float32)
+            self._seen_near_places(np.asarray(points.seen_from, float))
         self._failed = np.full(points.n_points, -10**9, np.int64)
         self._frame = 0
+        self._measured_at = -1
         size = int(config.scene_patch_px)
         self._half = size // 2
+        self.unavailable = scene_tracks_unavailable(index, config)
         self._lk = dict(winSize=(11, 11), maxLevel=1, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
                         criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01))
         self.reset()
@@ -96,6 +104,11 @@ class SceneTracks:
     def __len__(self) -> int:
         return len(self.ids)
 
+    @property
+    def _pixels_per_degree(self) -> float:
+        """Of the run's camera (set after the index, as the first CameraInfo comes)."""
+        return math.radians(pixels_per_radian(self.index.frame_camera))
+
     def next_frame(self) -> None:
         """Count a frame (for the search cool-down)."""
         self._frame += 1
@@ -105,6 +118,7 @@ class SceneTracks:
                 ) -> tuple[np.ndarray, np.ndarray]:
         """Return ``(uv (m, 2), xyz (m, 3))``: the points found near where the pose puts them."""
         self._measured_rows = np.zeros(0, np.int64)
+        self._measured_at = self._frame
         if not self.enabled or not len(self.ids):
             return np.zeros((0, 2)), np.zeros((0, 3))
         uv, visible = self.index.project_points(camera_pose, self.index.scene_xyz[self.ids])
@@ -134,7 +148,8 @@ class SceneTracks:
                                                     **self._lk)
         found = found.reshape(-1, 2)
         good = (status.ravel() == 1) & \
-            (np.linalg.norm(found - guess.reshape(-1, 2), axis=1) <= _MAX_SHIFT_PX)
+            (np.linalg.norm(found - guess.reshape(-1, 2), axis=1)
+             <= MAX_SHIFT_DEG * self._pixels_per_degree)
         rows = rows[good]
         self._measured_rows = rows
         self._measured = (found[good] - cell[good] + corner[rows]).astype(float)
@@ -151,8 +166,8 @@ class SceneTracks:
             state: ``(x, y, yaw, pitch, roll, dz)`` of the refinement, or None.
             windows: SIFT windows to spend on births this frame.
         """
-        if not self.enabled:
-            return
+        if not self.enabled or self._measured_at != self._frame:
+            return  # no refinement measured this frame: nothing to judge the points by
         keep = np.zeros(len(self.ids), bool)
         if len(self._measured_rows):
             from landmark_localizer.absolute_pose import point_errors
@@ -184,7 +199,7 @@ class SceneTracks:
         return near[(self._failed[near] <= self._frame - self.config.redetect_cooldown)
                     & ~tracked[near]]
 
-    def _seen_near_places(self) -> None:
+    def _seen_near_places(self, seen: np.ndarray) -> None:
         """For each position of the pose space, the points seen from near it (once).
 
         A point qualifies at a position within its images' spread plus ``SEEN_MARGIN_M``
@@ -192,7 +207,6 @@ class SceneTracks:
         """
         places = np.unique(np.round(np.asarray(self.index.xy, float), 6), axis=0)
         self._places = cKDTree(places)
-        seen = self._seen
         lists = self._places.query_ball_point(seen[:, :2], seen[:, 2] + SEEN_MARGIN_M)
         point = np.repeat(np.arange(len(seen)), [len(x) for x in lists])
         place = np.concatenate([np.asarray(x, np.int64) for x in lists]) if len(point) \
@@ -217,11 +231,15 @@ class SceneTracks:
         if len(self.ids):
             mine, _ = self.index.project_points(camera_pose, self.index.scene_xyz[self.ids])
             np.add.at(occupied, self._cell(mine, w, h), 1)
-        rank = occupied[self._cell(uv, w, h)]
-        # The emptiest cells first; within a cell, the points seen from nearest (the
-        # candidates' order).
+        cell = self._cell(uv, w, h)
+        # Round the cells, emptiest first: a candidate ranks by its cell's tracked points
+        # plus the candidates of its cell before it (those seen from nearer).
+        order = np.argsort(cell, kind='stable')
+        before = np.empty(len(cell), np.int64)
+        before[order] = np.arange(len(cell)) - np.searchsorted(cell[order], cell[order])
+        rank = occupied[cell] + before
         order = np.argsort(rank, kind='stable')[:count]
-        radius = self.config.scene_search_px
+        radius = self.config.scene_search_deg * self._pixels_per_degree
         margin = int(math.ceil(radius)) + 8     # SIFT needs room around its keypoints
         half, size = self._half, 2 * self._half + 1
         born = []
@@ -241,8 +259,9 @@ class SceneTracks:
             close = np.linalg.norm(pts - np.array([u, v], np.float32), axis=1) <= radius
             if not close.any():
                 continue
-            d = np.sqrt(squared_distances(descriptors[close],
-                                          self._descriptors[point][None]).ravel())
+            reference = np.asarray(self.index.database.points.descriptors[point],
+                                   np.float32)[None]
+            d = np.sqrt(squared_distances(descriptors[close], reference).ravel())
             best = int(np.argmin(d))
             if d[best] > self.config.redetect_max_distance:
                 continue
@@ -265,6 +284,20 @@ class SceneTracks:
         col = np.clip((uv[:, 0] / w * _CELLS[0]).astype(np.int64), 0, _CELLS[0] - 1)
         row = np.clip((uv[:, 1] / h * _CELLS[1]).astype(np.int64), 0, _CELLS[1] - 1)
         return col + _CELLS[0] * row
+
+
+def scene_tracks_unavailable(index: DatabaseIndex, config: LocalizerConfig) -> str:
+    """Return why ``scene_tracks`` asks for what the database cannot give, or ''."""
+    points = index.database.points
+    if config.scene_tracks <= 0:
+        return ''
+    if not points.n_points:
+        return 'scene_tracks is set but the database holds no scene points'
+    if not points.has_seen_from:
+        return ('scene_tracks is set but the database does not say where its scene points '
+                'were seen from (schema 2; rebuild it with vbn build): no scene points '
+                'are measured')
+    return ''
 
 
 def _mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:

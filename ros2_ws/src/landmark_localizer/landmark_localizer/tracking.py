@@ -84,8 +84,12 @@ class Tracker:
         self.set_config(config)
 
     def set_config(self, config: LocalizerConfig) -> None:
-        """Use new settings from the next frame on (windows, thresholds, cool-down)."""
+        """Use new settings from the next frame on (windows, thresholds, scene points)."""
         self.config = config
+        old = self.scene.config
+        if (config.scene_tracks > 0) != (old.scene_tracks > 0) or \
+                config.scene_patch_px != old.scene_patch_px:
+            self.scene = SceneTracks(self.index, config, self.detector)  # a new birth set
         self.scene.config = config
         window = config.lk_window
         self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,

@@ -124,6 +124,8 @@ class PeerLocalizer:
         self.map = peer_map
         self.camera = camera
         self.config = config
+        if not len(peer_map.points) or not len(peer_map.descriptors):
+            raise LocalizerError('the peer map holds no points (FLANN cannot index none)')
         self.detector = peer_map.sift.create()
         if config.descriptors == 'one':
             rows = peer_map.representative

@@ -16,7 +16,8 @@ turned into ``map`` by the image's planar camera pose.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+import json
 import logging
 import math
 import os
@@ -36,7 +37,12 @@ from vbn_common.geometry.camera import CameraModel, camera_from_info, pixels_per
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, compose_poses, invert_pose
 from vbn_common.geometry.mount import tilted
 
-__all__ = ['PeerMap', 'PeerMapConfig', 'build_peer_map', 'load_peer_map', 'world_rays']
+__all__ = ['MIN_POINTS', 'PeerMap', 'PeerMapConfig', 'build_peer_map', 'load_peer_map',
+           'source_key', 'world_rays']
+
+#: Fewest triangulated points a peer map is built with (an absolute pose needs a few,
+#: FLANN's index at least one).
+MIN_POINTS = 10
 
 _LOG = logging.getLogger(__name__)
 
@@ -79,6 +85,8 @@ class PeerMap:
         camera_mount: (3,) planar pose of the camera on ``base_link``.
         sift: SIFT settings used.
         images: Exploration images the map was built from.
+        source: What it was built from (:func:`source_key`: the bag's files, their sizes
+            and times, the settings); a cache is used only for the same.
     """
 
     points: np.ndarray
@@ -90,6 +98,7 @@ class PeerMap:
     camera_mount: np.ndarray
     sift: SiftConfig
     images: int
+    source: str = ''
 
     @property
     def nbytes(self) -> int:
@@ -117,7 +126,7 @@ class PeerMap:
                  camera=np.array([width, height], np.int64), model=np.array(model),
                  d=np.asarray(d, float), k=np.asarray(k, float),
                  camera_tilt=self.camera_tilt, camera_mount=self.camera_mount,
-                 images=np.array(self.images),
+                 images=np.array(self.images), source=np.array(self.source),
                  sift=np.array([s.n_features, s.n_octave_layers, s.contrast_threshold,
                                 s.edge_threshold, s.sigma], float))
 
@@ -142,7 +151,22 @@ def load_peer_map(path: str | os.PathLike[str]) -> PeerMap:
         return PeerMap(data['points'], data['descriptors'], data['point_of'],
                        data['representative'],
                        (width, height, str(data['model']), data['d'], data['k']),
-                       data['camera_tilt'], data['camera_mount'], sift, int(data['images']))
+                       data['camera_tilt'], data['camera_mount'], sift, int(data['images']),
+                       str(data['source']) if 'source' in data else '')
+
+
+def source_key(bag: str | os.PathLike[str], sift: SiftConfig, config: PeerMapConfig) -> str:
+    """Return what a map is built from as one string: the bag's files and the settings.
+
+    The bag's path, each of its files' name, size and modification time, and every SIFT
+    and map setting: a rebuilt bag or a changed setting makes a different key.
+    """
+    path = Path(bag).resolve()
+    files = sorted(p for p in path.rglob('*') if p.is_file()) if path.is_dir() else [path]
+    stats = [(str(p.relative_to(path)) if path.is_dir() else p.name, p.stat().st_size,
+              p.stat().st_mtime_ns) for p in files if p.exists()]
+    return json.dumps({'bag': str(path), 'files': stats, 'sift': asdict(sift),
+                       'map': asdict(config)}, sort_keys=True)
 
 
 def world_rays(camera_pose: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -239,16 +263,18 @@ def build_peer_map(bag: str | os.PathLike[str], sift: SiftConfig | None = None,
         sift: SIFT settings (the landmark database's, for a fair comparison).
         config: Matching and triangulation settings.
         workers: Processes for SIFT (default every core).
-        cache: An ``.npz`` file: read when it exists with the same SIFT settings, else
-            written after building.
+        cache: An ``.npz`` file: read when it exists and was built from the same bag
+            files with the same settings (:func:`source_key`), else written after
+            building.
 
     Raises:
         LocalizerError: The bag cannot be read, or too few tracks triangulate.
     """
     sift = sift or SiftConfig()
-    if cache is not None and Path(cache).is_file():
+    source = source_key(bag, sift, config) if Path(bag).exists() else ''
+    if cache is not None and Path(cache).is_file() and source:
         cached = load_peer_map(cache)
-        if cached.sift == sift:
+        if cached.source == source:
             _LOG.info('peer map from %s', cache)
             return cached
     from vbn_common.exploration import read_exploration
@@ -327,6 +353,10 @@ def build_peer_map(bag: str | os.PathLike[str], sift: SiftConfig | None = None,
         np.einsum('ij,ij->i', ray_dirs, mean[track]), -1.0, 1.0)))
     good = (counts >= 2) & np.all(np.isfinite(points), axis=1) & \
         (2 * spread >= math.radians(config.min_angle_deg))
+    if good.sum() < MIN_POINTS:
+        raise LocalizerError(f'{bag}: only {int(good.sum())} SIFT tracks triangulate from '
+                             f'{len(poses)} images (the peer map needs {MIN_POINTS}): are '
+                             'the images textured, and their poses right?')
     new_id = np.cumsum(good) - 1
     take = good[track]
     rows, point_of = rows[take], new_id[track[take]]
@@ -341,7 +371,7 @@ def build_peer_map(bag: str | os.PathLike[str], sift: SiftConfig | None = None,
     result = PeerMap(points[good], desc, point_of.astype(np.int32), representative,
                      (info.width, info.height, info.distortion_model, info.d, info.k),
                      np.eye(3) if mount_tilt is None else np.asarray(mount_tilt, float),
-                     mount, sift, len(poses))
+                     mount, sift, len(poses), source)
     _LOG.info('peer map: %d images, %d image pairs, %d points with %d descriptors, '
               '%.2f MB (%.2f MB with one descriptor per point) in %.1f s', len(poses),
               len(pairs), len(result.points), len(desc), result.nbytes / 1e6,

@@ -164,6 +164,9 @@ def run(args: argparse.Namespace) -> int:
     else:
         localizer = Localizer(database, config)
         size_bytes = Path(args.db).stat().st_size
+        if localizer.tracker.scene.unavailable:
+            print(f'vbn localize: warning: {args.db}: {localizer.tracker.scene.unavailable}',
+                  file=sys.stderr)
     if not (args.baseline or args.peer):
         localizer.index.frame_camera = check_run_camera(run_bag, localizer.index.camera,
                                                         args.db)
