@@ -395,6 +395,10 @@ def test_a_finer_run_camera_is_judged_at_the_database_pixels() -> None:
     found = refine_on_points(index, ids, uv, seed, LocalizerConfig())
     assert found is not None and found is not seed
     assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
+    # The two-view seed is kept beside the refined pose (vbn localize reports both).
+    np.testing.assert_array_equal(found.two_view_pose, seed.estimate.pose)
+    np.testing.assert_array_equal(seed.two_view_pose, seed.estimate.pose)
+    assert PoseSolution(seed.estimate, ids, 0, len(ids), 0.0).two_view_pose is None
 
 
 def test_scene_points_join_the_refinement_but_never_judge_the_seed() -> None:

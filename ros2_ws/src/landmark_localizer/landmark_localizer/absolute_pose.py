@@ -576,4 +576,4 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
                             0.5 * (cov + cov.T), est.ray_angle, est.residual, est.n_views,
                             est.in_front)
     return PoseSolution(estimate, seed.inlier_classes, seed.views_used, seed.inliers,
-                        seed.residual_px, state[3:].copy())
+                        seed.residual_px, state[3:].copy(), seed.two_view_pose)

@@ -76,6 +76,8 @@ class Estimate:
         pose: (3,) ``base_link`` pose in ``map``, or None (no trustworthy pose).
         covariance: (3, 3) covariance of ``(x, y, yaw)``, or None.
         camera_pose: (3,) the camera's pose in ``map``, or None.
+        two_view_pose: (3,) the ``base_link`` pose the model views gave (7.4, 7.5)
+            before any refinement on 3-D points, where the pose came from them.
         tracked: Region features used this frame.
         event: ``'vote'``, ``'predicted_switch'``, ``'neighbour_vote'`` or
             ``'global_vote'`` (a region change after the features were lost),
@@ -92,6 +94,7 @@ class Estimate:
     tracked: int
     event: str
     seconds: float
+    two_view_pose: np.ndarray | None = None
 
 
 @dataclass
@@ -267,7 +270,7 @@ class Localizer:
                                   solution.estimate.pose, self._scene_matches(features))
         if found is None:
             return solution
-        polished = replace(solution, estimate=found.estimate)
+        polished = replace(solution, estimate=found.estimate, two_view=solution.two_view_pose)
         self._last_solution = polished
         self.camera_pose = found.estimate.pose
         return polished
@@ -538,7 +541,7 @@ class Localizer:
         if self._switched:
             event = event or 'predicted_switch'
             self._switched = False
-        pose = cov = camera = None
+        pose = cov = camera = two_view = None
         if solution is not None and (self.state == TRACKING or solution.views_used == 0):
             est = solution.estimate
             cov_ok = np.all(np.isfinite(est.covariance)) and \
@@ -552,11 +555,13 @@ class Localizer:
                 self.last_pose_stamp = frame.stamp_ns
                 self._last_camera = camera
                 self.predictor.add(frame.stamp_ns, pose, frame.odom)
+                if solution.two_view_pose is not None:
+                    two_view = base_pose(self.index, solution.two_view_pose)
         if event:
             self.stats.events[event] = self.stats.events.get(event, 0) + 1
         return Estimate(frame.stamp_ns, self.state, self.region if self.state == TRACKING
                         else -1, pose, cov, camera, tracked, event,
-                        time.perf_counter() - start)
+                        time.perf_counter() - start, two_view)
 
 
 class _TrackedCounts:

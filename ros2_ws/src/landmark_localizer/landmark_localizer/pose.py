@@ -41,6 +41,8 @@ class PoseSolution:
         residual_px: Largest RMS epipolar error of the views, pixels.
         tilt: ``(pitch, roll, dz)`` of the frame where a refinement on 3-D points found
             them (:func:`~landmark_localizer.absolute_pose.refine_on_points`), else None.
+        two_view: The camera pose the model views gave (7.4, 7.5) where a refinement on
+            3-D points moved it; None where the estimate is that pose itself.
     """
 
     estimate: PoseEstimate
@@ -49,6 +51,14 @@ class PoseSolution:
     inliers: int
     residual_px: float
     tilt: np.ndarray | None = None
+    two_view: np.ndarray | None = None
+
+    @property
+    def two_view_pose(self) -> np.ndarray | None:
+        """The two-view camera pose (the seed of any refinement); None without views."""
+        if not self.views_used:
+            return None
+        return self.two_view if self.two_view is not None else self.estimate.pose
 
 
 #: The frame's tilt and height are taken when they lower the cost to this fraction.

@@ -123,6 +123,8 @@ class RunEvaluation:
         recovery: Frames from each teleport to a correct pose (None: never).
         cpu_latency: Per-frame CPU time of the process (offline runs), the cost on one
             core whatever else the machine runs.
+        two_view: The accuracy of the model views' poses (7.4, 7.5) before the refinement
+            on 3-D points, on the frames posed from them (offline runs).
     """
 
     frames: int
@@ -134,6 +136,7 @@ class RunEvaluation:
     evo: Accuracy | None = None
     recovery: list[int | None] = field(default_factory=list)
     cpu_latency: Latency | None = None
+    two_view: Accuracy | None = None
 
     @property
     def availability(self) -> float:
@@ -576,7 +579,8 @@ def format_evaluation(evaluation: RunEvaluation, title: str = '') -> str:
                      f'{lat.tracking_p95 * 1e3:.1f} ms ({lat.tracking_frames} frames); LOST '
                      f'p50 {lat.lost_p50 * 1e3:.1f} / p95 {lat.lost_p95 * 1e3:.1f} ms '
                      f'({lat.lost_frames} frames)')
-    for name, acc in (('accuracy (ours)', e.accuracy), ('accuracy (evo)', e.evo)):
+    for name, acc in (('accuracy (ours)', e.accuracy), ('accuracy (evo)', e.evo),
+                      ('  two-view seed', e.two_view)):
         if acc is not None:
             lines.append(f'  {name:<17} translation median {acc.translation_median_m * 100:.2f}'
                          f' cm, p95 {acc.translation_p95_m * 100:.2f} cm, max '

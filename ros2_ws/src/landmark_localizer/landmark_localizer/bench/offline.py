@@ -20,6 +20,7 @@ from landmark_localizer.bench.evaluation import (
     RunEvaluation,
     evaluate_run,
     latency_summary,
+    pose_accuracy,
 )
 from landmark_localizer.bench.pose_bags import PoseRecord, RunBag
 from landmark_localizer.camera_check import frame_camera
@@ -151,7 +152,7 @@ def evaluate_offline(result: OfflineRun, run: RunBag, falls_to_lost: int | None 
         falls_to_lost: The localizer's count (``stats.falls_to_lost``).
 
     Returns:
-        The evaluation (without evo's figures).
+        The evaluation (without evo's figures), with the two-view seeds' accuracy.
     """
     estimates = result.estimates
     stamps = np.array([e.stamp_ns for e in estimates], np.int64)
@@ -165,6 +166,12 @@ def evaluate_offline(result: OfflineRun, run: RunBag, falls_to_lost: int | None 
                               run.truth_stamps_ns, run.truth_poses, events=events[order],
                               latency_s=result.latency_seconds[order], voted=voted[order],
                               falls_to_lost=falls_to_lost)
+    seeds = np.array([e.two_view_pose if e.two_view_pose is not None else np.full(3, np.nan)
+                      for e in estimates], float).reshape(-1, 3)[order]
+    seeded = np.isfinite(seeds).all(axis=1)
+    if len(run.truth_stamps_ns) and seeded.any():
+        evaluation = replace(evaluation, two_view=pose_accuracy(
+            stamps[order][seeded], seeds[seeded], run.truth_stamps_ns, run.truth_poses))
     if result.cpu_seconds is None:
         return evaluation
     return replace(evaluation, cpu_latency=latency_summary(result.cpu_seconds[order],
