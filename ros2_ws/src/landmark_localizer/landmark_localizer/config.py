@@ -83,7 +83,7 @@ class LocalizerConfig:
         motion_prior_deg: ... and of its predicted heading, degrees.
         scene_tracks: scene points measured per tracked frame at most, beside the
             region's features, for the refinement on 3-D points (0, the default:
-            none; 40 about halves the median error on the rooms, for about 4 ms a
+            none; 40 about halves the median error on the rooms, for 2 to 3 ms a
             frame; :mod:`landmark_localizer.scene_tracks`).
         scene_window_budget: SIFT windows a frame may search in all; new scene points
             are searched with what the tracker left.
