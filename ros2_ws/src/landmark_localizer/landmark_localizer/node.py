@@ -241,8 +241,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                 self.loaded = loaded
                 self.camera_key, self.camera_problem = None, ''  # re-check the CameraInfo
             loaded.localizer.set_config(config)
-        if loaded.localizer.tracker.scene.unavailable:
-            self.log.warning(f'{loaded.path}: {loaded.localizer.tracker.scene.unavailable}')
+        self._warn_unavailable(loaded)
         with self.lock:
             self.odometry.max_jump_m = settings.odom_max_jump_m
         self.settings = settings
@@ -298,9 +297,13 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         self._reset_inputs()
         self._create_interfaces()
         self.log.info(f'localizer configured: {loaded.describe()}')
+        self._warn_unavailable(loaded)
+        return _SUCCESS
+
+    def _warn_unavailable(self, loaded: LoadedDatabase) -> None:
+        """Log what the settings ask of the database that it cannot give (scene points)."""
         if loaded.localizer.tracker.scene.unavailable:
             self.log.warning(f'{loaded.path}: {loaded.localizer.tracker.scene.unavailable}')
-        return _SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         """Start processing images and publishing."""

@@ -163,8 +163,8 @@ def source_key(bag: str | os.PathLike[str], sift: SiftConfig, config: PeerMapCon
     """
     path = Path(bag).resolve()
     files = sorted(p for p in path.rglob('*') if p.is_file()) if path.is_dir() else [path]
-    stats = [(str(p.relative_to(path)) if path.is_dir() else p.name, p.stat().st_size,
-              p.stat().st_mtime_ns) for p in files if p.exists()]
+    stats = [(str(p.relative_to(path)) if path.is_dir() else p.name, st.st_size,
+              st.st_mtime_ns) for p in files for st in [p.stat()]]
     return json.dumps({'bag': str(path), 'files': stats, 'sift': asdict(sift),
                        'map': asdict(config)}, sort_keys=True)
 
