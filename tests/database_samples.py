@@ -6,6 +6,7 @@ explicit ``rng``.
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 import sqlite3
 
@@ -84,6 +85,11 @@ def sample_database(rng: np.random.Generator, nx: int = 3, ny: int = 3, n_classe
                          rng.integers(2, 30, ids.size),
                          np.column_stack([rng.uniform(0, 3, (ids.size, 2)),
                                           rng.uniform(0, 1, ids.size)]))
+    # Their exploration patches (schema 4), the last point without one.
+    patches = rng.integers(0, 256, (ids.size, 7, 7), dtype=np.uint8)
+    axes = rng.uniform(-0.01, 0.01, (ids.size, 2, 3)).astype(np.float32)
+    patches[-1], axes[-1] = 0, np.nan
+    points = replace(points, patches=patches, patch_axes=axes)
     return LandmarkDatabase(info, poses, classes, tuple(regions), decomposition.uncovered,
                             points)
 

@@ -127,6 +127,11 @@ def test_missing_table(db_file, tmp_path):
     ("UPDATE scene_points SET descriptor = x'00' WHERE id = 0", 'descriptor is not 128'),
     ('UPDATE scene_points SET class_id = 99 WHERE id = 0', 'out of range'),
     ('UPDATE scene_points SET views = 1 WHERE id = 0', 'fewer than 2 views'),
+    # Their patches (schema 4).
+    ("UPDATE scene_points SET patch = x'00' WHERE id = 0", 'not all one odd square size'),
+    ('UPDATE scene_points SET patch_axes = NULL WHERE id = 0', 'a patch needs its axes'),
+    ('UPDATE scene_points SET patch = patch_axes, patch_axes = patch WHERE id = 1',
+     'not all one odd square size'),
 ])
 def test_inconsistent_contents(db_file, tmp_path, statement, message):
     path = edited_copy(db_file, tmp_path / 'edited.db', statement)
@@ -410,3 +415,38 @@ def test_a_schema_1_file_opens_with_no_scene_points(tmp_path):
     # A schema 2 file without the table is damaged.
     lost = edited_copy(source, tmp_path / 'lost.db', 'DROP TABLE scene_points')
     assert "table 'scene_points' is missing" in refused(lost)
+
+
+def test_a_schema_3_file_opens_with_no_patches_and_patches_are_checked(tmp_path):
+    from dataclasses import replace
+
+    from database_samples import sample_database
+
+    sample = sample_database(np.random.default_rng(0))
+    assert sample.points.has_patches
+    assert sample.points.patch_mask.tolist() == [True] * 11 + [False]
+    plain = replace(sample, points=replace(sample.points, patches=None, patch_axes=None))
+    assert not plain.points.has_patches
+    source = tmp_path / 'new.db'
+    write_database(source, plain)
+    old = edited_copy(source, tmp_path / 'old.db',
+                      *(f'ALTER TABLE scene_points DROP COLUMN {c}'
+                        for c in ('patch', 'patch_axes')),
+                      'PRAGMA user_version = 3',
+                      "UPDATE meta SET value = '3' WHERE key = 'schema_version'")
+    opened = open_database(old)
+    assert opened == plain and not opened.points.has_patches
+    # A changed patch byte is caught by the checksum.
+    write_database(tmp_path / 'with.db', sample)
+    changed = edited_copy(tmp_path / 'with.db', tmp_path / 'changed.db',
+                          'UPDATE scene_points SET patch = zeroblob(49) WHERE id = 3')
+    assert 'checksum' in refused_open_only(changed)
+    # Patches without axes, an even side, a partly known axis: refused on construction.
+    with pytest.raises(LandmarkDbError, match='come together'):
+        replace(sample.points, patch_axes=None)
+    with pytest.raises(LandmarkDbError, match='s odd'):
+        replace(sample.points, patches=np.zeros((12, 6, 6), np.uint8))
+    axes = sample.points.patch_axes.copy()
+    axes[0, 0, 0] = np.nan
+    with pytest.raises(LandmarkDbError, match='partly unknown'):
+        replace(sample.points, patch_axes=axes)

@@ -49,12 +49,13 @@ from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.matching import squared_distances
 from vbn_common.geometry.camera import pixels_per_radian
 
-__all__ = ['MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable']
+__all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable',
+           'tile_mosaic']
 
 #: A point is searched from at most this far outside its exploration images' spread.
 SEEN_MARGIN_M = 0.15
 #: Grid of image cells that births fill evenly (columns, rows).
-_CELLS = (16, 4)
+CELLS = (16, 4)
 #: Largest shift of a measurement from the pose's prediction, degrees.
 MAX_SHIFT_DEG = 1.4
 #: The points searched from a position of the pose space: at most this many, those seen
@@ -140,7 +141,7 @@ class SceneTracks:
         gain = crops.std(axis=(1, 2)) / np.maximum(patches.std(axis=(1, 2)), 1.0)
         patches = (patches - mean_p[:, None, None]) * gain[:, None, None] + \
             mean_c[:, None, None]
-        before, now = _mosaic(patches, cols), _mosaic(crops, cols)
+        before, now = tile_mosaic(patches, cols), tile_mosaic(crops, cols)
         cell = np.stack([np.arange(len(rows)) % cols, np.arange(len(rows)) // cols], 1) * size
         start = (self._offsets[rows] + cell).astype(np.float32).reshape(-1, 1, 2)
         guess = (uv[rows] - corner[rows] + cell).astype(np.float32).reshape(-1, 1, 2)
@@ -227,7 +228,7 @@ class SceneTracks:
                                                 self.index.scene_xyz[candidates])
         candidates, uv = candidates[visible], uv[visible]
         h, w = image.shape[:2]
-        occupied = np.zeros(_CELLS[0] * _CELLS[1])
+        occupied = np.zeros(CELLS[0] * CELLS[1])
         if len(self.ids):
             mine, _ = self.index.project_points(camera_pose, self.index.scene_xyz[self.ids])
             np.add.at(occupied, self._cell(mine, w, h), 1)
@@ -281,9 +282,9 @@ class SceneTracks:
 
     @staticmethod
     def _cell(uv: np.ndarray, w: int, h: int) -> np.ndarray:
-        col = np.clip((uv[:, 0] / w * _CELLS[0]).astype(np.int64), 0, _CELLS[0] - 1)
-        row = np.clip((uv[:, 1] / h * _CELLS[1]).astype(np.int64), 0, _CELLS[1] - 1)
-        return col + _CELLS[0] * row
+        col = np.clip((uv[:, 0] / w * CELLS[0]).astype(np.int64), 0, CELLS[0] - 1)
+        row = np.clip((uv[:, 1] / h * CELLS[1]).astype(np.int64), 0, CELLS[1] - 1)
+        return col + CELLS[0] * row
 
 
 def scene_tracks_unavailable(index: DatabaseIndex, config: LocalizerConfig) -> str:
@@ -300,7 +301,7 @@ def scene_tracks_unavailable(index: DatabaseIndex, config: LocalizerConfig) -> s
     return ''
 
 
-def _mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:
+def tile_mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:
     """``(n, s, s)`` tiles laid row by row on a ``cols x cols`` grid, as one uint8 image."""
     n, size = len(tiles), tiles.shape[1]
     grid = np.zeros((cols * cols, size, size), np.float32)

@@ -27,7 +27,7 @@ import numpy as np
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.matching import squared_distances
-from landmark_localizer.scene_tracks import SceneTracks
+from landmark_localizer.scene_patches import scene_tracker
 
 __all__ = ['Tracker', 'Tracks']
 
@@ -80,7 +80,7 @@ class Tracker:
         self._reference: dict[int, np.ndarray] = {}
         self.windows = 0  # SIFT windows searched this frame
         # The scene points measured beside the region's features (issue 16).
-        self.scene = SceneTracks(index, config, detector)
+        self.scene = scene_tracker(index, config, detector)
         self.set_config(config)
 
     def set_config(self, config: LocalizerConfig) -> None:
@@ -89,7 +89,7 @@ class Tracker:
         old = self.scene.config
         if (config.scene_tracks > 0) != (old.scene_tracks > 0) or \
                 config.scene_patch_px != old.scene_patch_px:
-            self.scene = SceneTracks(self.index, config, self.detector)  # a new birth set
+            self.scene = scene_tracker(self.index, config, self.detector)  # a new birth set
         self.scene.config = config
         window = config.lk_window
         self._lk = dict(winSize=(window, window), maxLevel=config.lk_levels,

@@ -64,6 +64,7 @@ from visibility_builder.model_views import (
     extra_features,
     select_model_views,
 )
+from visibility_builder.point_patches import patch_sources
 from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
 from visibility_builder.scene_points import PointsConfig, labels_by_image, scene_points
 from visibility_builder.verification import VerifyConfig, verify_classes
@@ -444,10 +445,10 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
     stages.begin('points')
     image_labels = labels_by_image(sampling.frames_of_pose, classes.labels,
                                    [len(f) for f in features])
-    points = scene_points(image_labels, features,
-                          np.array([f.camera_pose for f in frames], float),
-                          exploration.camera_model(), kept, config.points)
-    stages.end(points=points.n_points, of_kept_classes=int((points.class_ids >= 0).sum()))
+    points = scene_points(image_labels, features, np.array([f.camera_pose for f in frames]),
+                          exploration.camera_model(), kept, config.points, *patch_sources(frames))
+    stages.end(points=points.n_points, of_kept_classes=int((points.class_ids >= 0).sum()),
+               with_patch=int(points.patch_mask.sum()))
 
     stages.begin('decompose', f'{config.decomposition.algorithm}, k={config.decomposition.k}')
     spacing = sampling.spacing

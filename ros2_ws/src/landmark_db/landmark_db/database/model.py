@@ -499,6 +499,9 @@ class LandmarkDatabase(ArrayEquality):
                 add(array)
             if self.points.has_seen_from:  # (schema 2 files have none: their digests hold)
                 add(self.points.seen_from)
+            if self.points.has_patches:  # (schema 3 files have none: their digests hold)
+                add(self.points.patches)
+                add(self.points.patch_axes)
         return digest.hexdigest()
 
     def to_world_instance(self) -> WorldInstance:

@@ -49,6 +49,14 @@ class ScenePoints(ArrayEquality):
             of one of them from that centre (metres); NaN rows where unknown (a schema 2
             file). The localizer searches a point only from near where it was seen
             (SIFT finds a feature at the scales it was seen at; issue 16).
+        patches: ``(n, s, s)`` uint8 (``s`` odd) the image around each point in one
+            exploration image that saw it, centred on the point's reprojection there
+            (schema 4; ``None`` in older files): the localizer aligns it in every
+            tracked frame (issue 16). Rows of points with no patch are zero.
+        patch_axes: ``(n, 2, 3)`` float32 the 3-D offsets from the point, on the plane
+            through it facing that exploration camera, that move its projection one
+            pixel right and one pixel down in the patch; NaN rows where a point has no
+            patch. With them a frame's pose predicts the patch's affine warp.
     """
 
     xyz: np.ndarray
@@ -56,6 +64,8 @@ class ScenePoints(ArrayEquality):
     descriptors: np.ndarray
     views: np.ndarray
     seen_from: np.ndarray | None = None
+    patches: np.ndarray | None = None
+    patch_axes: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         xyz = float_array(self.xyz, 'scene points', (None, 3))
@@ -82,10 +92,22 @@ class ScenePoints(ArrayEquality):
             raise LandmarkDbError('a class has two scene points')
         if views.size and views.min() < 2:
             raise LandmarkDbError('a scene point is seen by fewer than 2 views')
+        patches, axes = _patch_arrays(self.patches, self.patch_axes, n)
         for name, value in (('xyz', xyz), ('class_ids', class_ids),
                             ('descriptors', descriptors), ('views', views),
-                            ('seen_from', seen_from)):
+                            ('seen_from', seen_from), ('patches', patches),
+                            ('patch_axes', axes)):
             set_field(self, name, value)
+
+    @property
+    def has_patches(self) -> bool:
+        """Whether some point has a patch (a schema 4 file, or a new build)."""
+        return bool(self.n_points) and bool(self.patch_mask.any())
+
+    @property
+    def patch_mask(self) -> np.ndarray:
+        """``(n,)`` bool: the points that have a patch."""
+        return np.all(np.isfinite(self.patch_axes.reshape(-1, 6)), axis=1)
 
     @property
     def has_seen_from(self) -> bool:
@@ -113,3 +135,31 @@ class ScenePoints(ArrayEquality):
                                   f'(there are {n_classes} classes)')
         out[ids] = self.xyz[named]
         return out
+
+
+def _patch_arrays(patches: np.ndarray | None, axes: np.ndarray | None, n: int
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Check the patches and their axes (both or neither); none gives empty patches."""
+    if (patches is None) != (axes is None):
+        raise LandmarkDbError('scene point patches and patch axes come together')
+    if patches is None:
+        out = np.zeros((n, 0, 0), np.uint8), np.full((n, 2, 3), np.nan, np.float32)
+    else:
+        array = np.asarray(patches)
+        if array.ndim != 3 or len(array) != n or array.shape[1] != array.shape[2] or \
+                (array.shape[1] and array.shape[1] % 2 == 0):
+            raise LandmarkDbError(f'scene point patches have shape {array.shape}, expected '
+                                  f'({n}, s, s) with s odd')
+        if array.dtype != np.uint8:
+            raise LandmarkDbError(f'scene point patches must be uint8, got {array.dtype}')
+        offsets = np.asarray(axes, np.float32)
+        if offsets.shape != (n, 2, 3):
+            raise LandmarkDbError(f'scene point patch axes have shape {offsets.shape}, '
+                                  f'expected ({n}, 2, 3)')
+        known = np.isfinite(offsets.reshape(n, 6))
+        if not np.all(known.all(axis=1) | ~known.any(axis=1)):
+            raise LandmarkDbError('a scene point patch axis is partly unknown')
+        out = np.array(array, np.uint8), np.array(offsets)
+    for array in out:
+        array.setflags(write=False)
+    return out

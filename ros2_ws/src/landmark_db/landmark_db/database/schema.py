@@ -1,4 +1,4 @@
-"""The SQLite schema of the landmark database, version 3.
+"""The SQLite schema of the landmark database, version 4.
 
 One SQLite file holds one :class:`~landmark_db.database.model.LandmarkDatabase`. The
 file identifies itself three ways: ``PRAGMA application_id`` (:data:`APPLICATION_ID`,
@@ -37,11 +37,14 @@ region_adjacency        ``region_a < region_b, shared_poses, joining_edges``: th
                         regions when the database is opened
 uncovered               ``pose``: k-coverable poses no region covers
 scene_points            ``id, class_id, views, x, y, z, descriptor, seen_x, seen_y,
-                        seen_radius``: the triangulated scene points (:mod:`.points`),
-                        class -1 for a point the filters did not keep, a 128-byte uint8
-                        descriptor, and where the exploration saw it from (schema 3;
-                        schema 2 has no ``seen_*`` columns and is read with them
-                        unknown; a schema 1 file has no table and is read with no point)
+                        seen_radius, patch, patch_axes``: the triangulated scene points
+                        (:mod:`.points`), class -1 for a point the filters did not keep,
+                        a 128-byte uint8 descriptor, where the exploration saw it from
+                        (schema 3), and its exploration patch, ``s * s`` uint8 bytes
+                        row by row, with its axes, six little-endian float32 (schema
+                        4; NULL for a point with no patch). Schema 3 has no ``patch*``
+                        columns and schema 2 no ``seen_*``: they are read as unknown; a
+                        schema 1 file has no table and is read with no point
 ======================  ==================================================================
 
 A new column or table that old readers could ignore still bumps the version: readers
@@ -52,7 +55,7 @@ from __future__ import annotations
 __all__ = ['APPLICATION_ID', 'APPLICATION_NAME', 'REQUIRED_TABLES', 'SCHEMA_SQL',
            'SCHEMA_VERSION']
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """The schema version this code writes and the newest it reads."""
 
 APPLICATION_ID = int.from_bytes(b'VBNL', 'big')
@@ -158,7 +161,9 @@ CREATE TABLE scene_points (
     descriptor BLOB NOT NULL,
     seen_x REAL,
     seen_y REAL,
-    seen_radius REAL
+    seen_radius REAL,
+    patch BLOB,
+    patch_axes BLOB
 );
 """
 

@@ -46,7 +46,7 @@ from landmark_db.database.model import (
     RegionRecord,
     SampledPoses,
 )
-from landmark_db.database.points import ScenePoints
+from landmark_db.database.points_sql import has_table, insert_points, load_points
 from landmark_db.database.schema import (
     APPLICATION_ID,
     APPLICATION_NAME,
@@ -132,15 +132,7 @@ def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
     _insert_poses(connection, db.poses)
     _insert_classes(connection, db.classes)
     _insert_regions(connection, db)
-    points = db.points
-    seen = [None if not np.isfinite(row).all() else tuple(float(v) for v in row)
-            for row in points.seen_from]
-    connection.executemany('INSERT INTO scene_points VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)', (
-        (i, int(c), int(v), float(p[0]), float(p[1]), float(p[2]), d.tobytes(),
-         *(s if s is not None else (None, None, None)))
-        for i, (c, v, p, d, s) in enumerate(zip(points.class_ids.tolist(),
-                                                points.views.tolist(), points.xyz,
-                                                points.descriptors, seen, strict=True))))
+    insert_points(connection, db.points)
 
 
 def _insert_build_parameters(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
@@ -314,7 +306,7 @@ def database_summary(path: str | Path) -> DatabaseSummary:
         try:
             counts = {name: int(connection.execute(sql).fetchone()[0])
                       for name, sql in _COUNT_QUERIES.items()}
-            if _has_table(connection, 'scene_points'):
+            if has_table(connection, 'scene_points'):
                 counts['scene_points'] = int(connection.execute(_POINT_COUNT).fetchone()[0])
             build = {key: json.loads(value) for key, value in connection.execute(
                 'SELECT key, value FROM build_parameters ORDER BY key')}
@@ -499,38 +491,10 @@ def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjac
     regions = _load_regions(connection)
     uncovered = _array(connection, 'SELECT pose FROM uncovered ORDER BY pose', np.int64, 1)
     db = LandmarkDatabase(info, poses, classes, regions, uncovered[:, 0],
-                          _load_points(connection))
+                          load_points(connection))
     stored = _array(connection, 'SELECT region_a, region_b, shared_poses, joining_edges '
                     'FROM region_adjacency ORDER BY region_a, region_b', np.int64, 4)
     return db, RegionAdjacency(stored[:, :2], stored[:, 2], stored[:, 3])
-
-
-def _has_table(connection: sqlite3.Connection, name: str) -> bool:
-    return connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
-                              'name = ?', (name,)).fetchone() is not None
-
-
-def _load_points(connection: sqlite3.Connection) -> ScenePoints:
-    """Read the scene points (none in a schema 1 file)."""
-    if not _has_table(connection, 'scene_points'):
-        return ScenePoints.empty()
-    ints = _array(connection, 'SELECT id, class_id, views FROM scene_points ORDER BY id',
-                  np.int64, 3)
-    _check_ids(ints[:, 0], 'scene_points')
-    xyz = _array(connection, 'SELECT x, y, z FROM scene_points ORDER BY id', np.float64, 3)
-    blobs = [row[0] for row in connection.execute(
-        'SELECT descriptor FROM scene_points ORDER BY id')]
-    if any(len(blob) != DESCRIPTOR_SIZE for blob in blobs):
-        raise LandmarkDbError(f'a scene point descriptor is not {DESCRIPTOR_SIZE} bytes')
-    descriptors = np.frombuffer(b''.join(blobs), dtype=np.uint8).reshape(-1, DESCRIPTOR_SIZE)
-    columns = {row[1] for row in connection.execute('PRAGMA table_info(scene_points)')}
-    seen = None
-    if 'seen_radius' in columns:  # schema 3
-        rows = connection.execute('SELECT seen_x, seen_y, seen_radius FROM scene_points '
-                                  'ORDER BY id').fetchall()
-        seen = np.array([[np.nan if v is None else v for v in row] for row in rows],
-                        np.float64).reshape(-1, 3)
-    return ScenePoints(xyz, ints[:, 1], descriptors, ints[:, 2], seen)
 
 
 def _load_regions(connection: sqlite3.Connection) -> tuple[RegionRecord, ...]:
