@@ -105,3 +105,39 @@ def test_patch_sizes_are_checked(size) -> None:
     with pytest.raises(VisibilityBuilderError, match='patch_px'):
         PointsConfig(patch_px=size)
     assert PointsConfig(patch_px=0).patch_px == 0
+
+
+def _textured(camera, point: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    """A dark image with two blobs of different size at and beside the point's pixel."""
+    u, v = _pixel(camera, point, pose)
+    yy, xx = np.mgrid[0:camera.height, 0:camera.width]
+    dx, dy = xx - u, yy - v
+    image = 40 + 160 * np.exp(-(dx ** 2 + dy ** 2) / 6.0) + \
+        60 * np.exp(-((dx - 3) ** 2 + (dy + 2) ** 2) / 3.0)
+    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+
+
+def test_a_point_off_along_its_patch_view_ray_is_triangulated_where_its_patch_is() -> None:
+    from visibility_builder.point_patches import triangulate_on_patches
+
+    camera = make_camera('pinhole', 640, 480, hfov_deg=90)
+    truth = np.array([2.5, 0.2, 0.1])
+    poses = np.array([[0.0, 0.0, 0.0], [0.0, 0.4, 0.0], [0.0, -0.4, 0.05], [0.3, 0.0, 0.0]])
+    images = [_textured(camera, truth, pose) for pose in poses]
+    # Triangulated 4 cm too deep along image 0's ray: the patch cut there is still the
+    # blob's, and images 1 to 3 see the blob where the true point projects.
+    ray = truth / np.linalg.norm(truth)
+    guess = (truth + 0.04 * ray)[None]
+    uv = _pixel(camera, guess[0], poses[0])[None]
+    patches, axes = point_patches(guess, np.array([0]), uv, poses, camera, 15,
+                                  lambda i: images[i])
+    moved, found = triangulate_on_patches(guess, patches, axes, np.zeros(4, np.int64),
+                                          np.arange(4), poses, camera, lambda i: images[i],
+                                          min_views=3)
+    assert found.tolist() == [4]
+    assert np.linalg.norm(moved[0] - truth) < 2e-3 < np.linalg.norm(guess[0] - truth) / 10
+    # Found in fewer than min_views images: not moved.
+    kept, found = triangulate_on_patches(guess, patches, axes, np.zeros(2, np.int64),
+                                         np.arange(2), poses, camera, lambda i: images[i],
+                                         min_views=3)
+    assert found.tolist() == [2] and np.array_equal(kept, guess)

@@ -18,9 +18,10 @@ those patches instead, in every tracked frame, with no SIFT:
   little aside is nearly that). A point whose map scales the patch by less than half or
   more than twice, or mirrors it, is not measured (seen from too far from where it was).
 - **Align**: the warped patches, brought to the frame's brightness and contrast, are
-  aligned at the predicted pixels by one Lucas-Kanade call over a mosaic of them; an
-  alignment more than ``MAX_SHIFT_DEG`` from the prediction, or whose patch then
-  correlates with the frame below ``MIN_CORRELATION``, fails.
+  aligned at the predicted pixels by one Lucas-Kanade call over a mosaic of them
+  (:func:`vbn_common.patch_alignment.align_patches`); an alignment more than
+  ``MAX_SHIFT_DEG`` from the prediction, or whose patch then correlates with the frame
+  below ``MIN_CORRELATION``, fails.
 - **Judge**: a point the refined pose puts more than ``absolute_threshold_px`` from its
   measurement is not searched for ``redetect_cooldown`` frames.
 
@@ -30,21 +31,17 @@ found the point in the frame.
 """
 from __future__ import annotations
 
-import math
-
-import cv2
 import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
-from landmark_localizer.scene_tracks import CELLS, MAX_SHIFT_DEG, SceneTracks, tile_mosaic
+from landmark_localizer.scene_tracks import CELLS, MAX_SHIFT_DEG, SceneTracks
+from vbn_common.patch_alignment import align_patches
 
 __all__ = ['MIN_CORRELATION', 'PatchTracks', 'affine_maps', 'scene_tracker']
 
 #: Least normalised correlation of an aligned patch with the frame.
 MIN_CORRELATION = 0.75
-#: Extra frame pixels around each patch in the mosaic, for the alignment to move into.
-_MARGIN = 4
 #: Scale of a patch's warp outside which a point is not measured.
 _SCALES = (0.5, 2.0)
 
@@ -99,13 +96,6 @@ class PatchTracks(SceneTracks):
         self._stored = points.patches
         self._axes = np.asarray(points.patch_axes, float)
         self._has_patch = points.patch_mask
-        side = self._stored.shape[1]
-        self._side = side
-        self._tile = side + 2 * _MARGIN
-        window = side - 2
-        self._lk = dict(winSize=(window, window), maxLevel=0,
-                        flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
-                        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01))
 
     # -- measurement ---------------------------------------------------------------
     def measure(self, image: np.ndarray, camera_pose: np.ndarray
@@ -123,39 +113,15 @@ class PatchTracks(SceneTracks):
             return none
         xyz = self.index.scene_xyz[chosen]
         uv, maps, ok = affine_maps(self.index, pose, xyz, self._axes[chosen])
-        h, w = image.shape[:2]
-        tile, half = self._tile, self._tile // 2
-        corner = np.round(np.nan_to_num(uv)).astype(np.int64) - half
         det = maps[:, 0, 0] * maps[:, 1, 1] - maps[:, 0, 1] * maps[:, 1, 0]
         scale = np.sqrt(np.abs(det))
-        ok &= (det > 0) & (scale >= _SCALES[0]) & (scale <= _SCALES[1]) & \
-            (corner[:, 0] >= 0) & (corner[:, 1] >= 0) & \
-            (corner[:, 0] + tile <= w) & (corner[:, 1] + tile <= h)
+        ok &= (det > 0) & (scale >= _SCALES[0]) & (scale <= _SCALES[1])
         rows = np.flatnonzero(ok)
         self.ids = chosen[rows]
-        if not len(rows):
-            return none
-        templates = self._warp(chosen[rows], maps[rows])
-        span = np.arange(tile)
-        crops = image[corner[rows, 1, None, None] + span[None, :, None],
-                      corner[rows, 0, None, None] + span[None, None, :]].astype(np.float32)
-        templates = _match_brightness(templates, crops, self._side)
-        cols = int(math.ceil(math.sqrt(len(rows))))
-        before, now = tile_mosaic(templates, cols), tile_mosaic(crops, cols)
-        cell = np.stack([np.arange(len(rows)) % cols, np.arange(len(rows)) // cols], 1) * tile
-        start = (cell + half).astype(np.float32).reshape(-1, 1, 2)
-        guess = (uv[rows] - corner[rows] + cell).astype(np.float32).reshape(-1, 1, 2)
-        found, status, _ = cv2.calcOpticalFlowPyrLK(before, now, start, guess.copy(),
-                                                    **self._lk)
-        found = found.reshape(-1, 2)
-        pixel = found - cell + corner[rows]
-        good = (status.ravel() == 1) & np.all(np.isfinite(pixel), axis=1) & \
-            (np.linalg.norm(found - guess.reshape(-1, 2), axis=1)
-             <= MAX_SHIFT_DEG * self._pixels_per_degree)
-        good[good] = _correlations(image, pixel[good], templates[good],
-                                   self._side - 2) >= MIN_CORRELATION
-        self._measured_rows = np.flatnonzero(good)
-        self._measured = pixel[good].astype(float)
+        pixel, found = align_patches(image, self._stored[self.ids], uv[rows], maps[rows],
+                                     MAX_SHIFT_DEG * self._pixels_per_degree, MIN_CORRELATION)
+        self._measured_rows = np.flatnonzero(found)
+        self._measured = pixel[found]
         return self._measured, self.index.scene_xyz[self.ids[self._measured_rows]]
 
     def update(self, image: np.ndarray, camera_pose: np.ndarray, state: np.ndarray | None,
@@ -190,7 +156,6 @@ class PatchTracks(SceneTracks):
         kept = self.ids[self._failed[self.ids] <= self._frame - self.config.redetect_cooldown]
         candidates = self._candidates(pose)
         candidates = candidates[self._has_patch[candidates]]
-
         free = want - len(kept)
         if free <= 0 or not len(candidates):
             return kept[:want]
@@ -207,37 +172,3 @@ class PatchTracks(SceneTracks):
         rank = occupied[cell] + before
         new = candidates[np.argsort(rank, kind='stable')[:free]]
         return np.concatenate([kept, new]).astype(np.int64)
-
-    def _warp(self, points: np.ndarray, maps: np.ndarray) -> np.ndarray:
-        """``(n, tile, tile)`` float32: each stored patch warped by its map, centred."""
-        tile, centre = self._tile, (self._side - 1) / 2
-        out = np.empty((len(points), tile, tile), np.float32)
-        for i, (point, a) in enumerate(zip(points, maps, strict=True)):
-            shift = tile // 2 - a @ np.array([centre, centre])
-            matrix = np.column_stack([a, shift])
-            out[i] = cv2.warpAffine(self._stored[point], matrix, (tile, tile),
-                                    flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return out
-
-
-def _match_brightness(templates: np.ndarray, crops: np.ndarray, side: int) -> np.ndarray:
-    """Templates brought to their crops' mean and contrast over the central ``side`` square."""
-    lo = (templates.shape[1] - side) // 2
-    inner = (slice(None), slice(lo, lo + side), slice(lo, lo + side))
-    mean_t, mean_c = templates[inner].mean(axis=(1, 2)), crops[inner].mean(axis=(1, 2))
-    gain = crops[inner].std(axis=(1, 2)) / np.maximum(templates[inner].std(axis=(1, 2)), 1.0)
-    return (templates - mean_t[:, None, None]) * gain[:, None, None] + mean_c[:, None, None]
-
-
-def _correlations(image: np.ndarray, pixels: np.ndarray, templates: np.ndarray, side: int
-                  ) -> np.ndarray:
-    """Normalised correlation of each template's central square with the frame there."""
-    lo = (templates.shape[1] - side) // 2
-    gray = np.asarray(image, np.float32)
-    out = np.empty(len(pixels))
-    for i, (u, v) in enumerate(pixels):
-        a = cv2.getRectSubPix(gray, (side, side), (float(u), float(v))).ravel()
-        b = templates[i, lo:lo + side, lo:lo + side].ravel()
-        a, b = a - a.mean(), b - b.mean()
-        out[i] = float(a @ b) / max(float(np.sqrt((a @ a) * (b @ b))), 1e-9)
-    return out

@@ -48,9 +48,9 @@ from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.matching import squared_distances
 from vbn_common.geometry.camera import pixels_per_radian
+from vbn_common.patch_alignment import tile_mosaic
 
-__all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable',
-           'tile_mosaic']
+__all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable']
 
 #: A point is searched from at most this far outside its exploration images' spread.
 SEEN_MARGIN_M = 0.15
@@ -299,12 +299,3 @@ def scene_tracks_unavailable(index: DatabaseIndex, config: LocalizerConfig) -> s
                 'were seen from (schema 2; rebuild it with vbn build): no scene points '
                 'are measured')
     return ''
-
-
-def tile_mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:
-    """``(n, s, s)`` tiles laid row by row on a ``cols x cols`` grid, as one uint8 image."""
-    n, size = len(tiles), tiles.shape[1]
-    grid = np.zeros((cols * cols, size, size), np.float32)
-    grid[:n] = tiles
-    grid = grid.reshape(cols, cols, size, size).transpose(0, 2, 1, 3)
-    return np.clip(np.rint(grid.reshape(cols * size, cols * size)), 0, 255).astype(np.uint8)

@@ -34,9 +34,11 @@ import numpy as np
 
 from vbn_common.geometry.camera import CameraModel
 from vbn_common.images import ImageDecodeError, decode_image
+from vbn_common.patch_alignment import align_patches
 from visibility_builder.verification import map_rays
 
-__all__ = ['choose_patch_views', 'patch_axes', 'patch_sources', 'point_patches']
+__all__ = ['choose_patch_views', 'intersect_rays', 'patch_axes', 'patch_sources', 'point_patches',
+           'triangulate_on_patches']
 
 
 def patch_sources(frames: Sequence[Any]) -> tuple[Callable[[int], np.ndarray | None],
@@ -190,3 +192,91 @@ def point_patches(points: np.ndarray, view_image: np.ndarray, uv: np.ndarray,
     patches[~ok] = 0
     axes[~ok] = np.nan
     return patches, axes
+
+
+def intersect_rays(rays: np.ndarray, centres: np.ndarray, group: np.ndarray, n: int
+                   ) -> np.ndarray:
+    """Return the least-squares point of each group's rays (``(n, 3)``, NaN for an empty one).
+
+    Args:
+        rays: ``(m, 3)`` unit rays.
+        centres: ``(m, 3)`` where they start.
+        group: ``(m,)`` each ray's group, in ``[0, n)``.
+        n: number of groups.
+    """
+    proj = np.eye(3)[None] - rays[:, :, None] * rays[:, None, :]
+    a = np.zeros((n, 3, 3))
+    b = np.zeros((n, 3))
+    np.add.at(a, group, proj)
+    np.add.at(b, group, np.einsum('nij,nj->ni', proj, centres))
+    out = np.full((n, 3), np.nan)
+    some = np.bincount(group, minlength=n) >= 2
+    if some.any():
+        out[some] = np.linalg.solve(a[some] + 1e-9 * np.eye(3), b[some][:, :, None])[:, :, 0]
+    return out
+
+
+def triangulate_on_patches(points: np.ndarray, patches: np.ndarray, axes: np.ndarray,
+                           member_point: np.ndarray, member_image: np.ndarray,
+                           camera_poses: np.ndarray, camera: CameraModel,
+                           decode: Callable[[int], np.ndarray | None], min_views: int,
+                           max_shift_px: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulate each point where its patch is seen in the images that saw it.
+
+    A SIFT keypoint lies where SIFT puts it at that image's scale: the same feature seen
+    from elsewhere is found a few tenths of a pixel off, and the least-squares point of
+    those rays is not the patch's centre seen from elsewhere. Aligning the point's own
+    patch in every image that saw it (:func:`vbn_common.patch_alignment.align_patches`,
+    from the pixel and warp the current point predicts) measures the patch's centre
+    itself; the rays through those pixels give the point again. This is what the
+    localizer measures, so its measurements and the points agree.
+
+    Args:
+        points: ``(n, 3)`` the points (z above the camera).
+        patches: ``(n, s, s)`` their patches.
+        axes: ``(n, 2, 3)`` the patches' axes (NaN: the point has no patch).
+        member_point: ``(m,)`` the point of each image that saw a point.
+        member_image: ``(m,)`` that image.
+        camera_poses: ``(n_images, 3)`` camera ``(x, y, heading)``.
+        camera: the camera as mounted.
+        decode: the grey image of an image index (None if it cannot be decoded).
+        min_views: least images the patch must be found in for the point to move.
+        max_shift_px: farthest a found centre may lie from the current point's pixel.
+
+    Returns:
+        ``(points (n, 3), found (n,))``: the points, moved where their patch was found in
+        at least ``min_views`` images, and in how many images it was found.
+    """
+    n = len(points)
+    has = np.all(np.isfinite(axes.reshape(n, 6)), axis=1)
+    rows = np.flatnonzero(has[member_point])
+    point, image = member_point[rows], member_image[rows]
+    pose = np.asarray(camera_poses, float)[image]
+    m = len(rows)
+    ends = np.concatenate([points[point], points[point] + axes[point, 0],
+                           points[point] + axes[point, 1]])
+    proj, valid = camera.project(_local(ends, np.tile(pose, (3, 1))))
+    proj, valid = proj.reshape(3, m, 2), valid.reshape(3, m).all(axis=0)
+    maps = np.stack([proj[1] - proj[0], proj[2] - proj[0]], axis=2)
+    if camera.kind == 'panoramic':   # a step across the seam
+        maps[:, 0] = (maps[:, 0] + camera.width / 2) % camera.width - camera.width / 2
+    pixel = np.full((m, 2), np.nan)
+    order = np.argsort(image, kind='stable')
+    starts = np.flatnonzero(np.r_[True, image[order][1:] != image[order][:-1]])
+    for first, last in zip(starts, np.r_[starts[1:], m], strict=True):
+        these = order[first:last]
+        these = these[valid[these]]
+        gray = decode(int(image[order[first]])) if len(these) else None
+        if gray is None:
+            continue
+        pixel[these], _ = align_patches(gray, patches[point[these]], proj[0, these],
+                                        maps[these], max_shift_px)
+    good = np.all(np.isfinite(pixel), axis=1)
+    found = np.bincount(point[good], minlength=n)
+    rays = map_rays(camera.unproject(pixel[good]), pose[good, 2])
+    centres = np.column_stack([pose[good, :2], np.zeros(int(good.sum()))])
+    moved = intersect_rays(rays, centres, point[good], n)
+    out = np.array(points, float)
+    move = (found >= min_views) & np.all(np.isfinite(moved), axis=1)
+    out[move] = moved[move]
+    return out, found

@@ -38,7 +38,11 @@ from landmark_db.database.points import ScenePoints
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.camera import CameraModel
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.point_patches import choose_patch_views, point_patches
+from visibility_builder.point_patches import (
+    choose_patch_views,
+    point_patches,
+    triangulate_on_patches,
+)
 from visibility_builder.verification import map_rays, reprojection_error
 
 __all__ = ['PointsConfig', 'central_members', 'labels_by_image', 'scene_points']
@@ -169,11 +173,18 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
         row_of[keep] = np.arange(len(keep))
         member = np.flatnonzero(row_of[inverse] >= 0)
         usable = np.ones(len(camera_poses), bool) if usable_image is None else usable_image
-        view, view_uv = choose_patch_views(
-            points[keep], row_of[inverse[member]], image[member], camera_poses,
-            centre[keep], camera, config.patch_px, usable)
-        patches, axes = point_patches(points[keep], view, view_uv, camera_poses, camera,
-                                      config.patch_px, decode)
+        xyz = points[keep]
+        for attempt in range(2):
+            view, view_uv = choose_patch_views(
+                xyz, row_of[inverse[member]], image[member], camera_poses, centre[keep],
+                camera, config.patch_px, usable)
+            patches, axes = point_patches(xyz, view, view_uv, camera_poses, camera,
+                                          config.patch_px, decode)
+            if attempt == 0:   # each point where its patch is, then its patch there
+                xyz, _ = triangulate_on_patches(
+                    xyz, patches, axes, row_of[inverse[member]], image[member],
+                    camera_poses, camera, decode, config.min_views)
+        points[keep] = xyz
     return ScenePoints(points[keep], remap[ids[keep]], descriptors[chosen[keep]],
                        views[keep], np.column_stack([centre[keep], radius[keep]]),
                        patches, axes)

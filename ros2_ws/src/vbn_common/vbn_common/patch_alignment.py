@@ -1,0 +1,139 @@
+"""Align small image patches in an image where an affine warp predicts them (issue 16).
+
+Not in the thesis. A scene point of the database keeps a patch of one exploration image
+centred on the point, and the patch's axes (the 3-D steps of one patch pixel right and
+down); a pose then predicts where the point lies in another image and the affine map of
+its patch there. :func:`align_patches` finds each point's pixel from that prediction:
+
+1. warp each patch by its map into a tile centred on the point;
+2. cut the image's tile around the predicted pixel and bring the warped patch to that
+   tile's mean and contrast (exposure and lighting differ between images);
+3. one pyramidal Lucas-Kanade call over two mosaics of all tiles (OpenCV), from the
+   prediction;
+4. an alignment that moved more than ``max_shift_px`` from the prediction, or whose
+   patch then correlates with the image below ``min_correlation``, fails.
+
+The builder aligns each point's patch in the exploration images that saw it to
+triangulate the point where its patch is (:mod:`visibility_builder.point_patches`); the
+localizer aligns them in its frames (:mod:`landmark_localizer.scene_patches`). Both
+measure the same thing: the pixel of the patch's centre.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+__all__ = ['MARGIN_PX', 'align_patches', 'tile_mosaic', 'warp_patches']
+
+#: Image pixels around each warped patch in the mosaics, for the alignment to move into.
+MARGIN_PX = 4
+
+
+def tile_mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:
+    """``(n, s, s)`` tiles laid row by row on a ``cols x cols`` grid, as one uint8 image."""
+    n, size = len(tiles), tiles.shape[1]
+    grid = np.zeros((cols * cols, size, size), np.float32)
+    grid[:n] = tiles
+    grid = grid.reshape(cols, cols, size, size).transpose(0, 2, 1, 3)
+    return np.clip(np.rint(grid.reshape(cols * size, cols * size)), 0, 255).astype(np.uint8)
+
+
+def warp_patches(patches: np.ndarray, maps: np.ndarray, tile: int) -> np.ndarray:
+    """Warp each ``(s, s)`` patch by its ``2 x 2`` map into a ``tile`` square, centred.
+
+    Args:
+        patches: ``(n, s, s)`` uint8, ``s`` odd.
+        maps: ``(n, 2, 2)`` the image pixels one patch pixel right (column 0) and down
+            (column 1) moves to.
+        tile: The side of the output (odd).
+
+    Returns:
+        ``(n, tile, tile)`` float32: the patch centre at the tile's centre.
+    """
+    centre = (patches.shape[1] - 1) / 2
+    out = np.empty((len(patches), tile, tile), np.float32)
+    for i, (patch, a) in enumerate(zip(patches, maps, strict=True)):
+        shift = tile // 2 - a @ np.array([centre, centre])
+        out[i] = cv2.warpAffine(patch, np.column_stack([a, shift]), (tile, tile),
+                                flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
+def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: np.ndarray,
+                  max_shift_px: float, min_correlation: float = 0.75
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Find each patch's centre in ``image`` near where it is predicted (module docstring).
+
+    Args:
+        image: ``(h, w)`` uint8 grey image.
+        patches: ``(n, s, s)`` uint8 patches, ``s`` odd, each centred on its point.
+        uv: ``(n, 2)`` the predicted pixels of the centres.
+        maps: ``(n, 2, 2)`` the predicted affine maps (see :func:`warp_patches`).
+        max_shift_px: Largest move from the prediction, pixels.
+        min_correlation: Least normalised correlation of the aligned patch with the image.
+
+    Returns:
+        ``(pixel (n, 2), found (n,))``: the aligned centres (NaN where not found).
+    """
+    n = len(patches)
+    pixel = np.full((n, 2), np.nan)
+    found = np.zeros(n, bool)
+    if not n:
+        return pixel, found
+    side = patches.shape[1]
+    tile = side + 2 * MARGIN_PX
+    half = tile // 2
+    h, w = image.shape[:2]
+    corner = np.round(np.nan_to_num(uv, nan=-1e6)).astype(np.int64) - half
+    rows = np.flatnonzero(np.all(np.isfinite(uv), axis=1) & np.all(np.isfinite(maps.reshape(
+        n, 4)), axis=1) & (corner[:, 0] >= 0) & (corner[:, 1] >= 0) &
+        (corner[:, 0] + tile <= w) & (corner[:, 1] + tile <= h))
+    if not len(rows):
+        return pixel, found
+    templates = warp_patches(patches[rows], maps[rows], tile)
+    span = np.arange(tile)
+    crops = image[corner[rows, 1, None, None] + span[None, :, None],
+                  corner[rows, 0, None, None] + span[None, None, :]].astype(np.float32)
+    templates = _match_brightness(templates, crops, side)
+    cols = int(math.ceil(math.sqrt(len(rows))))
+    cell = np.stack([np.arange(len(rows)) % cols, np.arange(len(rows)) // cols], 1) * tile
+    start = (cell + half).astype(np.float32).reshape(-1, 1, 2)
+    guess = (uv[rows] - corner[rows] + cell).astype(np.float32).reshape(-1, 1, 2)
+    window = side - 2
+    moved, status, _ = cv2.calcOpticalFlowPyrLK(
+        tile_mosaic(templates, cols), tile_mosaic(crops, cols), start, guess.copy(),
+        winSize=(window, window), maxLevel=0, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01))
+    moved = moved.reshape(-1, 2)
+    at = (moved - cell + corner[rows]).astype(float)
+    good = (status.ravel() == 1) & np.all(np.isfinite(at), axis=1) & \
+        (np.linalg.norm(moved - guess.reshape(-1, 2), axis=1) <= max_shift_px)
+    good[good] = _correlations(image, at[good], templates[good], window) >= min_correlation
+    pixel[rows[good]] = at[good]
+    found[rows[good]] = True
+    return pixel, found
+
+
+def _match_brightness(templates: np.ndarray, crops: np.ndarray, side: int) -> np.ndarray:
+    """Templates brought to their crops' mean and contrast over the central ``side`` square."""
+    lo = (templates.shape[1] - side) // 2
+    inner = (slice(None), slice(lo, lo + side), slice(lo, lo + side))
+    mean_t, mean_c = templates[inner].mean(axis=(1, 2)), crops[inner].mean(axis=(1, 2))
+    gain = crops[inner].std(axis=(1, 2)) / np.maximum(templates[inner].std(axis=(1, 2)), 1.0)
+    return (templates - mean_t[:, None, None]) * gain[:, None, None] + mean_c[:, None, None]
+
+
+def _correlations(image: np.ndarray, pixels: np.ndarray, templates: np.ndarray, side: int
+                  ) -> np.ndarray:
+    """Normalised correlation of each template's central square with the image there."""
+    lo = (templates.shape[1] - side) // 2
+    gray = np.asarray(image, np.float32)
+    out = np.empty(len(pixels))
+    for i, (u, v) in enumerate(pixels):
+        a = cv2.getRectSubPix(gray, (side, side), (float(u), float(v))).ravel()
+        b = templates[i, lo:lo + side, lo:lo + side].ravel()
+        a, b = a - a.mean(), b - b.mean()
+        out[i] = float(a @ b) / max(float(np.sqrt((a @ a) * (b @ b))), 1e-9)
+    return out
