@@ -513,7 +513,8 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     checks): None as well when there are too few points to judge by. ``scene``: ``(uv,
     xyz)`` of scene points measured in the frame (:mod:`.scene_tracks`); those within
     ``absolute_threshold_px`` of the pose the tracked features give join its final
-    refinement (they never judge the seed).
+    refinement (they never judge the seed). The refinement's Huber threshold is
+    ``absolute_huber_px``.
     """
     points = index.points[class_ids]
     have = np.all(np.isfinite(points), axis=1)
@@ -531,7 +532,8 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
         return None
     if inliers.sum() < config.min_inliers:
         return seed
-    args = (threshold, 0.5 / focal, tilt_prior, config.height_prior_m, 8, motion_prior)
+    args = (config.absolute_huber_px / focal, 0.5 / focal, tilt_prior, config.height_prior_m,
+            8, motion_prior)
     found = refine_absolute(start, rays[inliers], points[inliers], *args)
     if found is None:
         return seed

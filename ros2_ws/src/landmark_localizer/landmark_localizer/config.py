@@ -73,6 +73,9 @@ class LocalizerConfig:
             a recent pose to check it against); 0 disables it.
         absolute_ratio: Lowe's ratio of those matches.
         absolute_threshold_px: their inlier threshold, pixels.
+        absolute_huber_px: the refinement of a tracked pose on 3-D points weighs a
+            residual beyond this many pixels less (Huber); a measurement is good to a few
+            tenths of a pixel, so a larger one is mostly a wrong one.
         absolute_min_spread_deg: least spread of the inliers' bearings, degrees (a
             tracked pose refined with the motion prior does not need it).
         absolute_prior_s: a pose at most this old (carried by the motion) bounds the
@@ -127,6 +130,7 @@ class LocalizerConfig:
     absolute_min_inliers: int = 15
     absolute_ratio: float = 0.8
     absolute_threshold_px: float = 3.0
+    absolute_huber_px: float = 0.3
     absolute_min_spread_deg: float = 20.0
     absolute_prior_s: float = 3.0
     motion_prior_m: float = 0.02
@@ -166,7 +170,7 @@ class LocalizerConfig:
         if self.scene_patch_px < 11 or self.scene_patch_px % 2 == 0:
             raise LocalizerError(f'scene_patch_px must be odd and >= 11, got '
                                  f'{self.scene_patch_px}')
-        for name in ('scene_search_deg', 'scene_max_move_m'):
+        for name in ('scene_search_deg', 'scene_max_move_m', 'absolute_huber_px'):
             if getattr(self, name) <= 0:
                 raise LocalizerError(f'{name} must be > 0, got {getattr(self, name)}')
 

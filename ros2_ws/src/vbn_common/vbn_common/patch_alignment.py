@@ -27,8 +27,9 @@ import numpy as np
 
 __all__ = ['MARGIN_PX', 'align_patches', 'tile_mosaic', 'warp_patches']
 
-#: Image pixels around each warped patch in the mosaics, for the alignment to move into.
-MARGIN_PX = 4
+#: Image pixels around each warped patch in the mosaics beyond the largest move, for the
+#: alignment's window.
+MARGIN_PX = 2
 
 
 def tile_mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:
@@ -83,7 +84,7 @@ def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: 
     if not n:
         return pixel, found
     side = patches.shape[1]
-    tile = side + 2 * MARGIN_PX
+    tile = side + 2 * (MARGIN_PX + int(math.ceil(max_shift_px)))
     half = tile // 2
     h, w = image.shape[:2]
     corner = np.round(np.nan_to_num(uv, nan=-1e6)).astype(np.int64) - half
@@ -110,7 +111,9 @@ def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: 
     at = (moved - cell + corner[rows]).astype(float)
     good = (status.ravel() == 1) & np.all(np.isfinite(at), axis=1) & \
         (np.linalg.norm(moved - guess.reshape(-1, 2), axis=1) <= max_shift_px)
-    good[good] = _correlations(image, at[good], templates[good], window) >= min_correlation
+    in_tile = moved - cell
+    good[good] = _correlations(crops[good], in_tile[good], templates[good],
+                               window) >= min_correlation
     pixel[rows[good]] = at[good]
     found[rows[good]] = True
     return pixel, found
@@ -125,15 +128,33 @@ def _match_brightness(templates: np.ndarray, crops: np.ndarray, side: int) -> np
     return (templates - mean_t[:, None, None]) * gain[:, None, None] + mean_c[:, None, None]
 
 
-def _correlations(image: np.ndarray, pixels: np.ndarray, templates: np.ndarray, side: int
+def _correlations(crops: np.ndarray, at: np.ndarray, templates: np.ndarray, side: int
                   ) -> np.ndarray:
-    """Normalised correlation of each template's central square with the image there."""
-    lo = (templates.shape[1] - side) // 2
-    gray = np.asarray(image, np.float32)
-    out = np.empty(len(pixels))
-    for i, (u, v) in enumerate(pixels):
-        a = cv2.getRectSubPix(gray, (side, side), (float(u), float(v))).ravel()
-        b = templates[i, lo:lo + side, lo:lo + side].ravel()
-        a, b = a - a.mean(), b - b.mean()
-        out[i] = float(a @ b) / max(float(np.sqrt((a @ a) * (b @ b))), 1e-9)
-    return out
+    """Normalised correlation of each template's central square with its crop at ``at``.
+
+    Args:
+        crops: ``(n, t, t)`` the image's tiles.
+        at: ``(n, 2)`` where each template's centre was found, in its tile's pixels.
+        templates: ``(n, t, t)`` the warped patches, centred.
+        side: The side of the compared square (odd).
+    """
+    n, tile = crops.shape[:2]
+    if not n:
+        return np.zeros(0)
+    lo = (tile - side) // 2
+    span = np.arange(side) - side // 2
+    base = np.floor(at)
+    fx, fy = (at - base).T
+    x = np.clip(base[:, 0, None] + span, 0, tile - 2).astype(np.int64)   # (n, side)
+    y = np.clip(base[:, 1, None] + span, 0, tile - 2).astype(np.int64)
+    rows = np.arange(n)[:, None, None]
+    yy, xx = y[:, :, None], x[:, None, :]
+    sample = (crops[rows, yy, xx] * ((1 - fx) * (1 - fy))[:, None, None]
+              + crops[rows, yy, xx + 1] * (fx * (1 - fy))[:, None, None]
+              + crops[rows, yy + 1, xx] * ((1 - fx) * fy)[:, None, None]
+              + crops[rows, yy + 1, xx + 1] * (fx * fy)[:, None, None]).reshape(n, -1)
+    ref = templates[:, lo:lo + side, lo:lo + side].reshape(n, -1)
+    a = sample - sample.mean(axis=1, keepdims=True)
+    b = ref - ref.mean(axis=1, keepdims=True)
+    return np.einsum('ij,ij->i', a, b) / np.maximum(
+        np.sqrt(np.einsum('ij,ij->i', a, a) * np.einsum('ij,ij->i', b, b)), 1e-9)
