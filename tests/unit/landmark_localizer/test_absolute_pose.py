@@ -496,3 +496,24 @@ def test_a_small_huber_threshold_sets_aside_measurements_a_pixel_or_two_off() ->
     assert error(exact, 0.3)[0] < 0.0005 and error(exact, 3.0)[0] < 0.0005
     with pytest.raises(Exception, match='absolute_huber_px'):
         LocalizerConfig(absolute_huber_px=0.0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 10**6))
+def test_the_closed_form_jacobian_is_the_residuals_derivative(seed: int) -> None:
+    from landmark_localizer.absolute_pose import _residuals, _residuals_and_jacobian
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-3, 3, (12, 3))
+    rays = rng.normal(size=(12, 3))
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    state = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi),
+                  rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)]
+    r, jac = _residuals_and_jacobian(state, rays, points)
+    np.testing.assert_allclose(r, _residuals(state, rays, points), atol=1e-12)
+    for k in range(6):
+        step = np.zeros(6)
+        step[k] = 1e-6
+        numeric = (_residuals(state + step, rays, points)
+                   - _residuals(state - step, rays, points)) / 2e-6
+        np.testing.assert_allclose(jac[:, :, k], numeric, atol=1e-6)

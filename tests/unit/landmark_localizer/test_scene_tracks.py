@@ -200,13 +200,13 @@ def test_tracker_rebuilds_its_scene_points_when_switched_on(world) -> None:
     from landmark_localizer.tracking import Tracker
 
     index, _ = world
-    tracker = Tracker(index, LocalizerConfig(), SIFT.create())
+    tracker = Tracker(index, LocalizerConfig(scene_tracks=0), SIFT.create())
     assert not tracker.scene.enabled and not tracker.scene.unavailable
     tracker.set_config(LocalizerConfig(scene_tracks=20))
     assert tracker.scene.enabled
     tracker.set_config(LocalizerConfig(scene_tracks=20, scene_patch_px=21))
     assert tracker.scene._half == 10
-    tracker.set_config(LocalizerConfig())
+    tracker.set_config(LocalizerConfig(scene_tracks=0))
     assert not tracker.scene.enabled
 
 
@@ -215,5 +215,6 @@ def test_a_database_without_seen_from_says_so(world) -> None:
     old = DatabaseIndex(replace(index.database, points=replace(index.database.points,
                                                                seen_from=None)))
     assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=40))
-    assert scene_tracks_unavailable(old, LocalizerConfig()) == ''
+    assert scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=0)) == ''
+    assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig())   # on by default
     assert scene_tracks_unavailable(index, LocalizerConfig(scene_tracks=40)) == ''

@@ -232,18 +232,14 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     centre = np.zeros(6)
     if motion_prior is not None:
         centre[:3], prior[:3] = motion_prior[0], motion_prior[1]
-    step = np.array([1e-5, 1e-5, 1e-6, 1e-6, 1e-6, 1e-5])
     n_free = int(free.sum())
     prior_info = np.diag(np.where(prior[free] > 0, (sigma / np.maximum(prior[free], 1e-12)) ** 2,
                                   0.0))
     info = None
     columns = np.flatnonzero(free)
-    probes = np.zeros((n_free, 6))
-    probes[np.arange(n_free), columns] = step[columns]
     for _ in range(iterations):
-        both = _residuals_many(np.vstack([state, state + probes]), rays, points)
-        r = both[0]
-        jac = ((both[1:] - r) / step[columns][:, None, None]).reshape(n_free, -1).T
+        r, full = _residuals_and_jacobian(state, rays, points)
+        jac = full[:, :, columns].reshape(-1, n_free)
         norms = np.linalg.norm(r, axis=1)
         weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
         jw = jac * weights[:, None]
@@ -268,6 +264,38 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     except np.linalg.LinAlgError:
         return None
     return state, cov
+
+
+def _residuals_and_jacobian(state: np.ndarray, rays: np.ndarray, points: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """``(r (n, 3), J (n, 3, 6))``: :func:`_residuals` and its derivatives, in closed form.
+
+    ``r = R(pitch, roll) ray - v / |v|`` with ``v = Rz(yaw)^T (p - (x, y, dz))``.
+    """
+    x, y, yaw, pitch, roll, dz = (float(v) for v in state)
+    cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    d_ry = np.array([[-sp, 0.0, cp], [0.0, 0.0, 0.0], [-cp, 0.0, -sp]])
+    d_rx = np.array([[0.0, 0.0, 0.0], [0.0, -sr, -cr], [0.0, cr, -sr]])
+    turned = rays @ (ry @ rx).T
+    dx, dy, dzp = points[:, 0] - x, points[:, 1] - y, points[:, 2] - dz
+    c, s = math.cos(yaw), math.sin(yaw)
+    v = np.column_stack([c * dx + s * dy, -s * dx + c * dy, dzp])
+    norm = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    u = v / norm[:, None]
+    jac = np.empty((len(points), 3, 6))
+    # d(-u)/d(state) = -(I - u u^T) / |v| dv/d(state), dv/dx, dv/dy, dv/dyaw, dv/ddz:
+    zero, one = np.zeros(len(points)), np.ones(len(points))
+    dv = np.stack([np.column_stack([-c * one, s * one, zero]),
+                   np.column_stack([-s * one, -c * one, zero]),
+                   np.column_stack([v[:, 1], -v[:, 0], zero]),
+                   np.column_stack([zero, zero, -one])], axis=2)          # (n, 3, 4)
+    projected = dv - u[:, :, None] * np.einsum('ni,nik->nk', u, dv)[:, None, :]
+    jac[:, :, [0, 1, 2, 5]] = -projected / norm[:, None, None]
+    jac[:, :, 3] = rays @ (d_ry @ rx).T
+    jac[:, :, 4] = rays @ (ry @ d_rx).T
+    return turned - u, jac
 
 
 def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generator, *,

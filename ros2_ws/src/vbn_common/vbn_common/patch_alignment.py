@@ -54,11 +54,14 @@ def warp_patches(patches: np.ndarray, maps: np.ndarray, tile: int) -> np.ndarray
         ``(n, tile, tile)`` float32: the patch centre at the tile's centre.
     """
     centre = (patches.shape[1] - 1) / 2
+    maps = np.asarray(maps, np.float64)
+    matrices = np.concatenate([maps, (tile // 2 - maps.sum(axis=2) * centre)[:, :, None]],
+                              axis=2)
     out = np.empty((len(patches), tile, tile), np.float32)
-    for i, (patch, a) in enumerate(zip(patches, maps, strict=True)):
-        shift = tile // 2 - a @ np.array([centre, centre])
-        out[i] = cv2.warpAffine(patch, np.column_stack([a, shift]), (tile, tile),
-                                flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    size, flags, border = (tile, tile), cv2.INTER_LINEAR, cv2.BORDER_REPLICATE
+    for i in range(len(patches)):
+        out[i] = cv2.warpAffine(patches[i], matrices[i], size, flags=flags,
+                                borderMode=border)
     return out
 
 
