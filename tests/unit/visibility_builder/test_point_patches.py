@@ -107,6 +107,12 @@ def test_patch_sizes_are_checked(size) -> None:
     assert PointsConfig(patch_px=0).patch_px == 0
 
 
+@pytest.mark.parametrize('views', [1, 2.5, True])
+def test_patch_min_views_is_checked(views) -> None:
+    with pytest.raises(VisibilityBuilderError, match='patch_min_views'):
+        PointsConfig(patch_min_views=views)
+
+
 def _textured(camera, point: np.ndarray, pose: np.ndarray) -> np.ndarray:
     """A dark image with two blobs of different size at and beside the point's pixel."""
     u, v = _pixel(camera, point, pose)

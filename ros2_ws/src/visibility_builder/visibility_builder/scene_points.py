@@ -21,7 +21,8 @@ point. This step keeps those points, with one descriptor each, as
 5. where it was seen from: the centre of its images' camera positions and the largest
    distance of one from it (the localizer searches a point only near there);
 6. its patch in one exploration image, and the patch's axes (:mod:`.point_patches`),
-   when the images are given and ``patch_px`` is not 0.
+   when the images are given, ``patch_px`` is not 0 and at least ``patch_min_views``
+   images see it; such a point is triangulated again where its patch is found.
 
 A class the filters kept carries its database id; the others -1. Cost: a sort and
 linear passes over the classified features (about 0.1 s for the room's 60k members).
@@ -58,8 +59,11 @@ class PointsConfig:
         min_angle_deg: least angle between two of its rays, degrees.
         max_distance_m: farthest the point lies from a camera that sees it, metres.
         max_error_px: largest reprojection error of a member, pixels.
-        patch_px: side of the exploration patch kept with each point (odd; 0: none),
+        patch_px: side of the exploration patch kept with a point (odd; 0: none),
             pixels: the localizer aligns it where a frame's pose puts the point.
+        patch_min_views: only a point seen by at least this many exploration images
+            keeps a patch (those seen by more measure as well or better, and the
+            patches are most of a point's bytes).
     """
 
     enabled: bool = True
@@ -68,8 +72,13 @@ class PointsConfig:
     max_distance_m: float = 30.0
     max_error_px: float = 1.5
     patch_px: int = 15
+    patch_min_views: int = 8
 
     def __post_init__(self) -> None:
+        if isinstance(self.patch_min_views, bool) or \
+                int(self.patch_min_views) != self.patch_min_views or self.patch_min_views < 2:
+            raise VisibilityBuilderError(f'points.patch_min_views must be an integer >= 2, '
+                                         f'got {self.patch_min_views!r}')
         if isinstance(self.patch_px, bool) or int(self.patch_px) != self.patch_px or \
                 self.patch_px < 0 or (self.patch_px and (self.patch_px < 7
                                                          or self.patch_px % 2 == 0)):
@@ -171,7 +180,8 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
     if decode is not None and config.patch_px and len(keep):
         row_of = np.full(n, -1, np.int64)
         row_of[keep] = np.arange(len(keep))
-        member = np.flatnonzero(row_of[inverse] >= 0)
+        member = np.flatnonzero((row_of[inverse] >= 0) &
+                                (views[inverse] >= config.patch_min_views))
         usable = np.ones(len(camera_poses), bool) if usable_image is None else usable_image
         xyz = points[keep]
         for attempt in range(2):
