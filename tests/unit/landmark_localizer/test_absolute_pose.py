@@ -175,8 +175,8 @@ def test_absolute_solution_poses_a_frame_from_the_index_points() -> None:
 
 
 def test_tracked_points_polish_a_close_seed_and_reject_a_wrong_one() -> None:
-    from landmark_localizer.absolute_pose import refine_on_points
     from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import refine_on_points
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.localize import PoseEstimate
 
@@ -320,8 +320,8 @@ def test_points_in_a_narrow_cone_polish_the_seed_only_with_the_motion_prior() ->
     A two-view seed 20 cm off stays as it is without a prior (the points alone cannot
     judge it); with the prior 1 cm from the truth, points and prior put it within 1 cm.
     """
-    from landmark_localizer.absolute_pose import refine_on_points
     from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import refine_on_points
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.localize import PoseEstimate
 
@@ -375,8 +375,8 @@ def test_a_finer_run_camera_is_judged_at_the_database_pixels() -> None:
     """
     from localizer_samples import CAMERA, HEIGHT
 
-    from landmark_localizer.absolute_pose import refine_on_points
     from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import refine_on_points
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.camera import PanoramicCamera
     from vbn_common.geometry.frames import world_points_to_camera
@@ -411,9 +411,9 @@ def test_scene_points_join_the_refinement_but_never_judge_the_seed() -> None:
     measurement 10 px off is left out (the pose is as good)."""
     from localizer_samples import HEIGHT, project, synthetic_database, wall_points
 
-    from landmark_localizer.absolute_pose import refine_on_points
     from landmark_localizer.config import LocalizerConfig
     from landmark_localizer.index import DatabaseIndex
+    from landmark_localizer.points_refinement import refine_on_points
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.localize import PoseEstimate
 
@@ -459,11 +459,12 @@ def test_a_small_huber_threshold_sets_aside_measurements_a_pixel_or_two_off() ->
     """Scene points with 0.1 px noise, an eighth of them 1.5 to 2.5 px off one way (within
     the 3 px inlier threshold, so none is dropped): least squares (a 3 px Huber) is
     pulled (the heading most: the outliers all lean one way); the default 0.3 px
-    threshold keeps the pose within a millimetre and the heading within 0.01 deg. Exact measurements give the exact pose either way."""
+    threshold keeps the pose within a millimetre and the heading within 0.01 deg. Exact
+    measurements give the pose within half a millimetre either way."""
     from localizer_samples import HEIGHT, project, wall_points
 
-    from landmark_localizer.absolute_pose import refine_on_points
     from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import refine_on_points
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.localize import PoseEstimate
 

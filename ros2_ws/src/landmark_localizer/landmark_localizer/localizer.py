@@ -30,10 +30,11 @@ import time
 import numpy as np
 
 from landmark_db.database import LandmarkDatabase
-from landmark_localizer.absolute_pose import absolute_solution, refine_on_points
+from landmark_localizer.absolute_pose import absolute_solution
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.points_refinement import refine_on_points
 from landmark_localizer.pose import PoseSolution, base_pose, refine_pose, solve_pose
 from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracker, Tracks

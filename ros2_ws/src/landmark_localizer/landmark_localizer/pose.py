@@ -40,7 +40,7 @@ class PoseSolution:
         inliers: Correspondences kept, summed over the views.
         residual_px: Largest RMS epipolar error of the views, pixels.
         tilt: ``(pitch, roll, dz)`` of the frame where a refinement on 3-D points found
-            them (:func:`~landmark_localizer.absolute_pose.refine_on_points`), else None.
+            them (:func:`~landmark_localizer.points_refinement.refine_on_points`), else None.
         two_view: The camera pose the model views gave (7.4, 7.5) where a refinement on
             3-D points moved it; None where the estimate is that pose itself.
     """

@@ -138,7 +138,7 @@ class PatchTracks(SceneTracks):
             return
         keep = np.zeros(len(self.ids), bool)
         if len(self._measured_rows):
-            from landmark_localizer.absolute_pose import point_errors
+            from landmark_localizer.points_refinement import point_errors
 
             errors = point_errors(self.index, state if state is not None else camera_pose,
                                   self._measured, self.index.scene_xyz[

@@ -1,7 +1,7 @@
 """Scene points measured in the tracked frames: more geometry for the pose (issue 16).
 
 Not in the thesis. The thesis poses a frame from the region's k features in two or three
-model views (7.4, 7.5), and :func:`~landmark_localizer.absolute_pose.refine_on_points`
+model views (7.4, 7.5), and :func:`~landmark_localizer.points_refinement.refine_on_points`
 polishes that pose on the tracked features' class points. Where those features crowd
 one side of the image the polished pose is weak across them: on ``room_run`` the worst
 regions were 2 to 3 cm off while their points fitted both that pose and the true one
@@ -171,7 +171,7 @@ class SceneTracks:
             return  # no refinement measured this frame: nothing to judge the points by
         keep = np.zeros(len(self.ids), bool)
         if len(self._measured_rows):
-            from landmark_localizer.absolute_pose import point_errors
+            from landmark_localizer.points_refinement import point_errors
 
             errors = point_errors(self.index, state if state is not None else camera_pose,
                                   self._measured, self.index.scene_xyz[
