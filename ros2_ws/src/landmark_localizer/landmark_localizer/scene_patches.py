@@ -136,17 +136,7 @@ class PatchTracks(SceneTracks):
         """
         if not self.enabled or self._measured_at != self._frame:
             return
-        keep = np.zeros(len(self.ids), bool)
-        if len(self._measured_rows):
-            from landmark_localizer.points_refinement import point_errors
-
-            errors = point_errors(self.index, state if state is not None else camera_pose,
-                                  self._measured, self.index.scene_xyz[
-                                      self.ids[self._measured_rows]])
-            good = errors <= self.config.absolute_threshold_px / self.index.residual_focal
-            keep[self._measured_rows[good]] = True
-            self._failed[self.ids[self._measured_rows[~good]]] = self._frame
-        self.ids = self.ids[keep]
+        self.ids = self.ids[self._judged(camera_pose, state)]
         self._measured_rows = np.zeros(0, np.int64)
 
     # -- helpers ---------------------------------------------------------------------

@@ -47,6 +47,7 @@ from scipy.spatial import cKDTree
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.matching import squared_distances
+from landmark_localizer.points_refinement import point_errors
 from vbn_common.geometry.camera import pixels_per_radian
 from vbn_common.patch_alignment import tile_mosaic
 
@@ -169,22 +170,28 @@ class SceneTracks:
         """
         if not self.enabled or self._measured_at != self._frame:
             return  # no refinement measured this frame: nothing to judge the points by
-        keep = np.zeros(len(self.ids), bool)
-        if len(self._measured_rows):
-            from landmark_localizer.points_refinement import point_errors
-
-            errors = point_errors(self.index, state if state is not None else camera_pose,
-                                  self._measured, self.index.scene_xyz[
-                                      self.ids[self._measured_rows]])
-            ok = errors <= self.config.absolute_threshold_px / self.index.residual_focal
-            keep[self._measured_rows[ok]] = True
-            self._failed[self.ids[self._measured_rows[~ok]]] = self._frame
+        keep = self._judged(camera_pose, state)
         moved = np.linalg.norm(self._born_at - np.asarray(camera_pose[:2]), axis=1)
         keep &= moved <= self.config.scene_max_move_m
         self._subset(keep)
         if windows > 0 and len(self.ids) < self.config.scene_tracks:
             self._birth(image, np.asarray(camera_pose, float),
                         min(windows, self.config.scene_tracks - len(self.ids)))
+
+    def _judged(self, camera_pose: np.ndarray, state: np.ndarray | None) -> np.ndarray:
+        """Return ``(len(self),)`` bool: the points measured within the inlier threshold.
+
+        The others measured this frame are not searched for ``redetect_cooldown`` frames.
+        """
+        keep = np.zeros(len(self.ids), bool)
+        if len(self._measured_rows):
+            errors = point_errors(self.index, state if state is not None else camera_pose,
+                                  self._measured, self.index.scene_xyz[
+                                      self.ids[self._measured_rows]])
+            ok = errors <= self.config.absolute_threshold_px / self.index.residual_focal
+            keep[self._measured_rows[ok]] = True
+            self._failed[self.ids[self._measured_rows[~ok]]] = self._frame
+        return keep
 
     def _subset(self, keep: np.ndarray) -> None:
         self.ids, self._patches = self.ids[keep], self._patches[keep]

@@ -33,11 +33,12 @@ import cv2
 import numpy as np
 
 from vbn_common.geometry.camera import CameraModel
+from vbn_common.geometry.rays import intersect_rays
 from vbn_common.images import ImageDecodeError, decode_image
 from vbn_common.patch_alignment import align_patches
 from visibility_builder.verification import map_rays
 
-__all__ = ['choose_patch_views', 'intersect_rays', 'patch_axes', 'patch_sources', 'point_patches',
+__all__ = ['choose_patch_views', 'patch_axes', 'patch_sources', 'point_patches',
            'triangulate_on_patches']
 
 
@@ -192,28 +193,6 @@ def point_patches(points: np.ndarray, view_image: np.ndarray, uv: np.ndarray,
     patches[~ok] = 0
     axes[~ok] = np.nan
     return patches, axes
-
-
-def intersect_rays(rays: np.ndarray, centres: np.ndarray, group: np.ndarray, n: int
-                   ) -> np.ndarray:
-    """Return the least-squares point of each group's rays (``(n, 3)``, NaN for an empty one).
-
-    Args:
-        rays: ``(m, 3)`` unit rays.
-        centres: ``(m, 3)`` where they start.
-        group: ``(m,)`` each ray's group, in ``[0, n)``.
-        n: number of groups.
-    """
-    proj = np.eye(3)[None] - rays[:, :, None] * rays[:, None, :]
-    a = np.zeros((n, 3, 3))
-    b = np.zeros((n, 3))
-    np.add.at(a, group, proj)
-    np.add.at(b, group, np.einsum('nij,nj->ni', proj, centres))
-    out = np.full((n, 3), np.nan)
-    some = np.bincount(group, minlength=n) >= 2
-    if some.any():
-        out[some] = np.linalg.solve(a[some] + 1e-9 * np.eye(3), b[some][:, :, None])[:, :, 0]
-    return out
 
 
 def triangulate_on_patches(points: np.ndarray, patches: np.ndarray, axes: np.ndarray,

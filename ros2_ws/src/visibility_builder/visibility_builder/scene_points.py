@@ -38,6 +38,7 @@ import numpy as np
 from landmark_db.database.points import ScenePoints
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.camera import CameraModel
+from vbn_common.geometry.rays import intersect_rays
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.point_patches import (
     choose_patch_views,
@@ -138,16 +139,9 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
 
     ids, inverse = np.unique(labels, return_inverse=True)
     n = len(ids)
-    proj = np.eye(3)[None] - rays[:, :, None] * rays[:, None, :]
-    a = np.zeros((n, 3, 3))
-    b = np.zeros((n, 3))
-    np.add.at(a, inverse, proj)
-    np.add.at(b, inverse, np.einsum('nij,nj->ni', proj, centres))
     views = np.bincount(inverse, minlength=n)
     ok = views >= config.min_views
-    points = np.full((n, 3), np.nan)
-    if ok.any():
-        points[ok] = np.linalg.solve(a[ok] + 1e-9 * np.eye(3), b[ok][:, :, None])[:, :, 0]
+    points = intersect_rays(rays, centres, inverse, n, solve=ok)
     # Spread: the largest angle of a member's ray from the class's mean ray.
     mean = np.zeros((n, 3))
     np.add.at(mean, inverse, rays)
