@@ -82,3 +82,35 @@ def test_echo_without_timeout_says_once_that_it_waits(start_process):
         time.sleep(0.2)
     assert proc.output.count('waiting for a publisher') == 1, proc.output
     assert proc.stop() == 0, proc.output
+
+
+@pytest.mark.parametrize('args', [
+    ['localizer', '--ros-args', '-p', 'db:=/nonexistent.db'],
+    ['builder', '--ros-args', '-p', 'db:=/nonexistent/x.db'],
+    ['dds_probe', 'echo'],
+])
+def test_every_executable_refuses_a_bad_domain_in_one_line(ros_env, args):
+    """The node executables give the same one line as ``vbn`` before rclpy starts."""
+    result = _run(args, {**ros_env, 'ROS_DOMAIN_ID': 'abc'})
+    assert result.returncode == 2, result
+    assert result.stdout == '' and 'Traceback' not in result.stderr
+    assert result.stderr.strip().splitlines() == [
+        f'{args[0]}: error: ROS_DOMAIN_ID=abc is not an integer (allowed: an integer 0-232; '
+        "0-101 and 215-232 also stay clear of Linux's ephemeral ports)"]
+
+
+@pytest.mark.parametrize(('args', 'line'), [
+    (['builder', '--ros-args', '-p', 'decomposition.k:=abc'],
+     "builder: error: parameter decomposition.k: Trying to set parameter 'decomposition.k' "
+     "to 'abc' of type 'STRING', expecting type 'INTEGER'"),
+    (['localizer', '--ros-args', '-p', 'dbb:=x'],
+     "localizer: error: unknown parameter 'dbb' (did you mean 'db'?)"),
+    (['builder', '--ros-args', '-p', 'decompositon.k:=3'],
+     "builder: error: unknown parameter 'decompositon.k' (did you mean 'decomposition.k'?)"),
+])
+def test_a_mistyped_parameter_is_one_line_naming_it(ros_env, args, line):
+    result = _run(args, ros_env)
+    assert result.returncode == 2, result
+    assert 'Traceback' not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(line), lines
