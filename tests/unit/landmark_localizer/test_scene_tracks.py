@@ -216,5 +216,5 @@ def test_a_database_without_seen_from_says_so(world) -> None:
                                                                seen_from=None)))
     assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=40))
     assert scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=0)) == ''
-    assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig())   # on by default
+    assert scene_tracks_unavailable(old, LocalizerConfig()) == ''            # off by default
     assert scene_tracks_unavailable(index, LocalizerConfig(scene_tracks=40)) == ''
