@@ -13,15 +13,10 @@ import numpy as np
 
 from landmark_db.database.fields import DESCRIPTOR_SIZE
 from landmark_db.database.points import ScenePoints
+from landmark_db.database.sql_rows import check_ids, has_table, rows_array
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['has_table', 'insert_points', 'load_points']
-
-
-def has_table(connection: sqlite3.Connection, name: str) -> bool:
-    """Whether the file has table ``name``."""
-    return connection.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND "
-                              'name = ?', (name,)).fetchone() is not None
+__all__ = ['insert_points', 'load_points']
 
 
 def insert_points(connection: sqlite3.Connection, points: ScenePoints) -> None:
@@ -45,11 +40,10 @@ def load_points(connection: sqlite3.Connection) -> ScenePoints:
     """Read the scene points (none in a schema 1 file)."""
     if not has_table(connection, 'scene_points'):
         return ScenePoints.empty()
-    ints = _rows(connection, 'SELECT id, class_id, views FROM scene_points ORDER BY id',
+    ints = rows_array(connection, 'SELECT id, class_id, views FROM scene_points ORDER BY id',
                  np.int64, 3)
-    if not np.array_equal(ints[:, 0], np.arange(len(ints))):
-        raise LandmarkDbError(f'scene_points ids are not 0..{len(ints) - 1}')
-    xyz = _rows(connection, 'SELECT x, y, z FROM scene_points ORDER BY id', np.float64, 3)
+    check_ids(ints[:, 0], 'scene_points')
+    xyz = rows_array(connection, 'SELECT x, y, z FROM scene_points ORDER BY id', np.float64, 3)
     blobs = [row[0] for row in connection.execute(
         'SELECT descriptor FROM scene_points ORDER BY id')]
     if any(len(blob) != DESCRIPTOR_SIZE for blob in blobs):
@@ -90,7 +84,3 @@ def _load_patches(connection: sqlite3.Connection, n: int
             patches[i] = np.frombuffer(patch, np.uint8).reshape(side, side)
             axes[i] = np.frombuffer(axis, '<f4').reshape(2, 3)
     return patches, axes
-
-
-def _rows(connection: sqlite3.Connection, sql: str, dtype: type, width: int) -> np.ndarray:
-    return np.array(connection.execute(sql).fetchall(), dtype=dtype).reshape(-1, width)

@@ -46,7 +46,7 @@ from landmark_db.database.model import (
     RegionRecord,
     SampledPoses,
 )
-from landmark_db.database.points_sql import has_table, insert_points, load_points
+from landmark_db.database.points_sql import insert_points, load_points
 from landmark_db.database.schema import (
     APPLICATION_ID,
     APPLICATION_NAME,
@@ -54,6 +54,7 @@ from landmark_db.database.schema import (
     SCHEMA_SQL,
     SCHEMA_VERSION,
 )
+from landmark_db.database.sql_rows import check_ids, has_table, rows_array
 from landmark_db.errors import LandmarkDbError
 
 __all__ = ['DatabaseSummary', 'database_image', 'database_summary', 'open_database',
@@ -430,16 +431,6 @@ def _shorten(text: str, limit: int = 160) -> str:
     return text if len(text) <= limit else text[:limit - 3] + '...'
 
 
-def _array(connection: sqlite3.Connection, sql: str, dtype: Any, width: int) -> np.ndarray:
-    rows = connection.execute(sql).fetchall()
-    return np.array(rows, dtype=dtype).reshape(-1, width)
-
-
-def _check_ids(ids: np.ndarray, table: str) -> None:
-    if not np.array_equal(ids, np.arange(ids.size)):
-        raise LandmarkDbError(f'{table} ids are not 0..{ids.size - 1}')
-
-
 def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjacency]:
     build = {key: json.loads(value) for key, value in
              connection.execute('SELECT key, value FROM build_parameters')}
@@ -447,19 +438,19 @@ def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjac
         raise LandmarkDbError("build parameter 'pose_spacing' is missing")
     info = BuildInfo.from_dict(build)
 
-    ints = _array(connection, 'SELECT id, grid_ix, grid_iy FROM poses ORDER BY id',
+    ints = rows_array(connection, 'SELECT id, grid_ix, grid_iy FROM poses ORDER BY id',
                   np.int64, 3)
-    _check_ids(ints[:, 0], 'poses')
-    reals = _array(connection, 'SELECT x, y, yaw FROM poses ORDER BY id', np.float64, 3)
-    edges = _array(connection, 'SELECT id, a, b FROM edges ORDER BY id', np.int64, 3)
-    _check_ids(edges[:, 0], 'edges')
+    check_ids(ints[:, 0], 'poses')
+    reals = rows_array(connection, 'SELECT x, y, yaw FROM poses ORDER BY id', np.float64, 3)
+    edges = rows_array(connection, 'SELECT id, a, b FROM edges ORDER BY id', np.int64, 3)
+    check_ids(edges[:, 0], 'edges')
     poses = SampledPoses(reals[:, :2], reals[:, 2], ints[:, 1:], edges[:, 1:],
                          build['pose_spacing'])
     n = poses.n_poses
 
-    counts = _array(connection, 'SELECT id, n_descriptors FROM classes ORDER BY id',
+    counts = rows_array(connection, 'SELECT id, n_descriptors FROM classes ORDER BY id',
                     np.int64, 2)
-    _check_ids(counts[:, 0], 'classes')
+    check_ids(counts[:, 0], 'classes')
     rows = connection.execute('SELECT class_id, descriptor FROM class_descriptors '
                               'ORDER BY class_id, ordinal').fetchall()
     owners = np.array([row[0] for row in rows], dtype=np.int64)
@@ -489,22 +480,22 @@ def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjac
     classes = FeatureClasses(descriptors, offsets, visibility)
 
     regions = _load_regions(connection)
-    uncovered = _array(connection, 'SELECT pose FROM uncovered ORDER BY pose', np.int64, 1)
+    uncovered = rows_array(connection, 'SELECT pose FROM uncovered ORDER BY pose', np.int64, 1)
     db = LandmarkDatabase(info, poses, classes, regions, uncovered[:, 0],
                           load_points(connection))
-    stored = _array(connection, 'SELECT region_a, region_b, shared_poses, joining_edges '
+    stored = rows_array(connection, 'SELECT region_a, region_b, shared_poses, joining_edges '
                     'FROM region_adjacency ORDER BY region_a, region_b', np.int64, 4)
     return db, RegionAdjacency(stored[:, :2], stored[:, 2], stored[:, 3])
 
 
 def _load_regions(connection: sqlite3.Connection) -> tuple[RegionRecord, ...]:
-    table = _array(connection, 'SELECT id, n_poses, n_landmark, n_extra, n_model_views '
+    table = rows_array(connection, 'SELECT id, n_poses, n_landmark, n_extra, n_model_views '
                    'FROM regions ORDER BY id', np.int64, 5)
-    _check_ids(table[:, 0], 'regions')
+    check_ids(table[:, 0], 'regions')
     n_regions = table.shape[0]
-    members = _array(connection, 'SELECT region, pose FROM region_poses '
+    members = rows_array(connection, 'SELECT region, pose FROM region_poses '
                      'ORDER BY region, pose', np.int64, 2)
-    features = _array(connection, "SELECT region, role = 'landmark', ordinal, class_id "
+    features = rows_array(connection, "SELECT region, role = 'landmark', ordinal, class_id "
                       'FROM region_features', np.int64, 4)
     # Per region: landmark (flag 1) first, then extra, each in stored order.
     features = features[np.lexsort((features[:, 2], -features[:, 1], features[:, 0]))]
