@@ -35,7 +35,7 @@ import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
-from landmark_localizer.scene_tracks import CELLS, MAX_SHIFT_DEG, SceneTracks
+from landmark_localizer.scene_tracks import MAX_SHIFT_DEG, SceneTracks
 from vbn_common.patch_alignment import align_patches
 
 __all__ = ['MIN_CORRELATION', 'PatchTracks', 'affine_maps', 'scene_tracker']
@@ -149,16 +149,5 @@ class PatchTracks(SceneTracks):
         free = want - len(kept)
         if free <= 0 or not len(candidates):
             return kept[:want]
-        uv, visible = self.index.project_points(pose, self.index.scene_xyz[candidates])
-        candidates, uv = candidates[visible], uv[visible]
-        occupied = np.zeros(CELLS[0] * CELLS[1])
-        if len(kept):
-            mine, seen = self.index.project_points(pose, self.index.scene_xyz[kept])
-            np.add.at(occupied, self._cell(mine[seen], w, h), 1)
-        cell = self._cell(uv, w, h)
-        order = np.argsort(cell, kind='stable')
-        before = np.empty(len(cell), np.int64)
-        before[order] = np.arange(len(cell)) - np.searchsorted(cell[order], cell[order])
-        rank = occupied[cell] + before
-        new = candidates[np.argsort(rank, kind='stable')[:free]]
+        new, _ = self._round_the_cells(candidates, kept, pose, w, h, free)
         return np.concatenate([kept, new]).astype(np.int64)

@@ -228,30 +228,14 @@ class SceneTracks:
         self._seen_starts = np.searchsorted(place[keep], np.arange(len(places) + 1))
 
     def _birth(self, image: np.ndarray, camera_pose: np.ndarray, count: int) -> None:
-        candidates = self._candidates(camera_pose)
-        if not len(candidates):
-            return
-        uv, visible = self.index.project_points(camera_pose,
-                                                self.index.scene_xyz[candidates])
-        candidates, uv = candidates[visible], uv[visible]
         h, w = image.shape[:2]
-        occupied = np.zeros(CELLS[0] * CELLS[1])
-        if len(self.ids):
-            mine, _ = self.index.project_points(camera_pose, self.index.scene_xyz[self.ids])
-            np.add.at(occupied, self._cell(mine, w, h), 1)
-        cell = self._cell(uv, w, h)
-        # Round the cells, emptiest first: a candidate ranks by its cell's tracked points
-        # plus the candidates of its cell before it (those seen from nearer).
-        order = np.argsort(cell, kind='stable')
-        before = np.empty(len(cell), np.int64)
-        before[order] = np.arange(len(cell)) - np.searchsorted(cell[order], cell[order])
-        rank = occupied[cell] + before
-        order = np.argsort(rank, kind='stable')[:count]
+        candidates, uv = self._round_the_cells(self._candidates(camera_pose), self.ids,
+                                               camera_pose, w, h, count)
         radius = self.config.scene_search_deg * self._pixels_per_degree
         margin = int(math.ceil(radius)) + 8     # SIFT needs room around its keypoints
         half, size = self._half, 2 * self._half + 1
         born = []
-        for j in order:
+        for j in range(len(candidates)):
             u, v = uv[j]
             x0, x1 = max(0, int(u) - margin), min(w, int(u) + margin + 1)
             y0, y1 = max(0, int(v) - margin), min(h, int(v) + margin + 1)
@@ -286,6 +270,27 @@ class SceneTracks:
             self._offsets = np.concatenate([self._offsets, np.stack([b[2] for b in born])])
             self._born_at = np.concatenate([self._born_at,
                                             np.repeat(camera_pose[None, :2], len(born), 0)])
+
+    def _round_the_cells(self, candidates: np.ndarray, kept: np.ndarray,
+                         camera_pose: np.ndarray, w: int, h: int, count: int
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Return up to ``count`` candidates the pose shows, round the cells, and their pixels.
+
+        Emptiest cells first: a candidate ranks by its cell's ``kept`` points plus the
+        candidates of its cell before it (those seen from nearer).
+        """
+        uv, visible = self.index.project_points(camera_pose, self.index.scene_xyz[candidates])
+        candidates, uv = candidates[visible], uv[visible]
+        occupied = np.zeros(CELLS[0] * CELLS[1])
+        if len(kept):
+            mine, seen = self.index.project_points(camera_pose, self.index.scene_xyz[kept])
+            np.add.at(occupied, self._cell(mine[seen], w, h), 1)
+        cell = self._cell(uv, w, h)
+        order = np.argsort(cell, kind='stable')
+        before = np.empty(len(cell), np.int64)
+        before[order] = np.arange(len(cell)) - np.searchsorted(cell[order], cell[order])
+        order = np.argsort(occupied[cell] + before, kind='stable')[:max(count, 0)]
+        return candidates[order], uv[order]
 
     @staticmethod
     def _cell(uv: np.ndarray, w: int, h: int) -> np.ndarray:
