@@ -36,7 +36,7 @@ import numpy as np
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.scene_tracks import MAX_SHIFT_DEG, SceneTracks
-from vbn_common.patch_alignment import align_patches
+from vbn_common.patch_alignment import align_patches, patch_maps
 
 __all__ = ['MIN_CORRELATION', 'PatchTracks', 'affine_maps', 'scene_tracker']
 
@@ -73,10 +73,8 @@ def affine_maps(index: DatabaseIndex, camera_pose: np.ndarray, xyz: np.ndarray,
     ends = np.concatenate([xyz, xyz + axes[:, 0], xyz + axes[:, 1]])
     uv, ok = index.project_points(camera_pose, ends)
     uv, ok = uv.reshape(3, n, 2), ok.reshape(3, n).all(axis=0)
-    maps = np.stack([uv[1] - uv[0], uv[2] - uv[0]], axis=2)
-    if index.frame_camera.kind == 'panoramic':   # a step across the seam
-        width = index.frame_camera.width
-        maps[:, 0] = (maps[:, 0] + width / 2) % width - width / 2
+    camera = index.frame_camera
+    maps = patch_maps(uv, camera.width if camera.kind == 'panoramic' else None)
     return uv[0], maps, ok
 
 

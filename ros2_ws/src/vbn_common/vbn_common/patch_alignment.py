@@ -25,11 +25,29 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ['MARGIN_PX', 'align_patches', 'tile_mosaic', 'warp_patches']
+__all__ = ['MARGIN_PX', 'align_patches', 'patch_maps', 'tile_mosaic', 'warp_patches']
 
 #: Image pixels around each warped patch in the mosaics beyond the largest move, for the
 #: alignment's window.
 MARGIN_PX = 2
+
+
+def patch_maps(ends: np.ndarray, seam_width: float | None = None) -> np.ndarray:
+    """Return each patch's affine map from the pixels of its point and its two axis ends.
+
+    Args:
+        ends: ``(3, n, 2)`` the pixels of the points, of the points plus their right axis
+            and plus their down axis.
+        seam_width: a panorama's width (a step across its seam wraps), or None.
+
+    Returns:
+        ``(n, 2, 2)``: the image pixels one patch pixel right (column 0) and down
+        (column 1) moves to.
+    """
+    maps = np.stack([ends[1] - ends[0], ends[2] - ends[0]], axis=2)
+    if seam_width is not None:
+        maps[:, 0] = (maps[:, 0] + seam_width / 2) % seam_width - seam_width / 2
+    return maps
 
 
 def tile_mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:

@@ -35,7 +35,7 @@ import numpy as np
 from vbn_common.geometry.camera import CameraModel
 from vbn_common.geometry.rays import intersect_rays
 from vbn_common.images import ImageDecodeError, decode_image
-from vbn_common.patch_alignment import align_patches
+from vbn_common.patch_alignment import align_patches, patch_maps
 from visibility_builder.verification import map_rays
 
 __all__ = ['choose_patch_views', 'patch_axes', 'patch_sources', 'point_patches',
@@ -236,9 +236,7 @@ def triangulate_on_patches(points: np.ndarray, patches: np.ndarray, axes: np.nda
                            points[point] + axes[point, 1]])
     proj, valid = camera.project(_local(ends, np.tile(pose, (3, 1))))
     proj, valid = proj.reshape(3, m, 2), valid.reshape(3, m).all(axis=0)
-    maps = np.stack([proj[1] - proj[0], proj[2] - proj[0]], axis=2)
-    if camera.kind == 'panoramic':   # a step across the seam
-        maps[:, 0] = (maps[:, 0] + camera.width / 2) % camera.width - camera.width / 2
+    maps = patch_maps(proj, camera.width if camera.kind == 'panoramic' else None)
     pixel = np.full((m, 2), np.nan)
     order = np.argsort(image, kind='stable')
     starts = np.flatnonzero(np.r_[True, image[order][1:] != image[order][:-1]])
