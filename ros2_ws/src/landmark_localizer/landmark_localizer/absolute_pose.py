@@ -180,30 +180,17 @@ def _tilt_rotation(pitch: float, roll: float) -> np.ndarray:
 
 
 def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(n, 3) observed ray (tilted by the state) minus the predicted direction."""
-    return _residuals_many(np.asarray(state, float)[None], rays, points)[0]
+    """(n, 3) observed ray (tilted by the state) minus the predicted direction.
 
-
-def _residuals_many(states: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """(m, n, 3) residuals of several states at once (a state and its probes: one pass).
-
-    The same as :func:`_tilt_rotation` and :func:`_predicted` per state, vectorised: the
-    refinement's cost is numpy's call overhead, not arithmetic.
+    The same as :func:`_tilt_rotation` and :func:`_predicted`; the refinement takes its
+    derivatives from :func:`_residuals_and_jacobian`.
     """
-    x, y, yaw, pitch, roll, dz = states.T
-    cp, sp, cr, sr = np.cos(pitch), np.sin(pitch), np.cos(roll), np.sin(roll)
-    # R = R_y(pitch) @ R_x(roll), rows written out.
-    rot = np.stack([np.stack([cp, sp * sr, sp * cr], 1),
-                    np.stack([np.zeros_like(cp), cr, -sr], 1),
-                    np.stack([-sp, cp * sr, cp * cr], 1)], 1)            # (m, 3, 3)
-    turned = np.einsum('mij,nj->mni', rot, rays)
-    dx = points[None, :, 0] - x[:, None]
-    dy = points[None, :, 1] - y[:, None]
-    dzp = points[None, :, 2] - dz[:, None]
-    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
-    v = np.stack([c * dx + s * dy, -s * dx + c * dy, dzp], axis=2)
-    v /= np.maximum(np.linalg.norm(v, axis=2, keepdims=True), 1e-12)
-    return turned - v
+    x, y, yaw, pitch, roll, dz = (float(v) for v in state)
+    turned = rays @ _tilt_rotation(pitch, roll).T
+    dx, dy, dzp = points[:, 0] - x, points[:, 1] - y, points[:, 2] - dz
+    c, s = math.cos(yaw), math.sin(yaw)
+    v = np.column_stack([c * dx + s * dy, -s * dx + c * dy, dzp])
+    return turned - v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-12)
 
 
 def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
