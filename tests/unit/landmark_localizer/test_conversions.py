@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
 import threading
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -196,3 +199,18 @@ def test_mailbox_keeps_only_the_newest_item_and_closes() -> None:
     box.put('d')
     box.close()
     assert box.take() == (False, None)  # closed: the worker stops, even with an item
+
+
+def test_the_node_runs_opencv_and_openblas_on_one_thread() -> None:
+    """main() calls it before the node loads: no thread pools beside the frame worker."""
+    code = ('import cv2\n'
+            'from landmark_localizer.node_support import one_thread_per_library\n'
+            'from vbn_common.blas import _openblas_thread_controls\n'
+            'cv2.setNumThreads(2)\n'
+            'one_thread_per_library()\n'
+            'print(cv2.getNumThreads(), [get() for get, _ in _openblas_thread_controls()])\n')
+    env = {k: v for k, v in os.environ.items() if 'NUM_THREADS' not in k}
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         env=env, check=True).stdout.split(maxsplit=1)
+    assert out[0] == '1'
+    assert set(eval(out[1])) <= {1}   # noqa: S307 - our own printed list

@@ -72,7 +72,7 @@ def _measure_then_update(tracks: SceneTracks, image: np.ndarray, pose: np.ndarra
 
 
 def _tracks(index: DatabaseIndex, **settings) -> SceneTracks:
-    settings.setdefault('scene_tracks', 40)   # off by default (config)
+    settings.setdefault('scene_tracks', 40)
     return SceneTracks(index, LocalizerConfig(**settings), SIFT.create())
 
 
@@ -216,5 +216,5 @@ def test_a_database_without_seen_from_says_so(world) -> None:
                                                                seen_from=None)))
     assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=40))
     assert scene_tracks_unavailable(old, LocalizerConfig(scene_tracks=0)) == ''
-    assert scene_tracks_unavailable(old, LocalizerConfig()) == ''            # off by default
+    assert 'schema 2' in scene_tracks_unavailable(old, LocalizerConfig())     # on by default
     assert scene_tracks_unavailable(index, LocalizerConfig(scene_tracks=40)) == ''

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from landmark_localizer.node_support import limit_malloc_arenas
+from landmark_localizer.node_support import limit_malloc_arenas, one_thread_per_library
 from vbn_common.node_main import run_node
 
 __all__ = ['main']
@@ -19,6 +19,7 @@ __all__ = ['main']
 def main(args: list[str] | None = None) -> int:
     """Run the localizer node; return the exit code (2 on a start-up error)."""
     limit_malloc_arenas()
+    one_thread_per_library()
     return run_node('localizer', _make_node, args)
 
 

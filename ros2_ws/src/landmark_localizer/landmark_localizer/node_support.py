@@ -156,3 +156,22 @@ def limit_malloc_arenas(arenas: int = _ARENAS) -> bool:
         return bool(libc.mallopt(_M_ARENA_MAX, arenas))
     except (OSError, AttributeError):
         return False
+
+
+def one_thread_per_library() -> None:
+    """Run OpenCV and OpenBLAS on the calling thread, without pools of their own.
+
+    A frame's work is small pieces (a warp or a correlation of a few patches, a solve of
+    a few hundred rows): waking a pool for each costs more than it saves, and beside the
+    executor thread, the DDS threads and a bag player on two cores the pools contend. The
+    pinhole demo with scene points measured by their patches went from a node latency
+    p50 of 60 ms and 35 dropped frames to 34 ms and 23 with one thread each (the same
+    database and run, ``OPENBLAS_NUM_THREADS=1 OPENCV_FOR_THREADS_NUM=1``). ``vbn
+    localize --one-core`` and the benchmarks measure the same way.
+    """
+    import cv2
+
+    from vbn_common.blas import set_blas_threads
+
+    cv2.setNumThreads(1)
+    set_blas_threads(1)

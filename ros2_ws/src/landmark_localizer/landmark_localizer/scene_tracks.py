@@ -305,9 +305,9 @@ def scene_tracks_unavailable(index: DatabaseIndex, config: LocalizerConfig) -> s
     if config.scene_tracks <= 0:
         return ''
     if not points.n_points:
-        return 'scene_tracks is set but the database holds no scene points'
+        return ("the database holds no scene points: poses rest on the regions' features "
+                'alone (rebuild it with vbn build for scene points)')
     if not points.has_seen_from:
-        return ('scene_tracks is set but the database does not say where its scene points '
-                'were seen from (schema 2; rebuild it with vbn build): no scene points '
-                'are measured')
+        return ('the database does not say where its scene points were seen from (schema '
+                '2): no scene points are measured (rebuild it with vbn build)')
     return ''

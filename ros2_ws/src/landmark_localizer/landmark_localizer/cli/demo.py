@@ -82,6 +82,9 @@ def register(subparsers: Any) -> None:
                         help='use this database instead of building OUT/room.db')
     parser.add_argument('--build-set', action='append', default=None, metavar='NAME=VALUE',
                         help="vbn build --set (repeatable; default: the builder's defaults)")
+    parser.add_argument('--param', action='append', default=[], metavar='NAME:=VALUE',
+                        help="a parameter of the localizer node, as ros2 run's -p takes it "
+                             '(repeatable; e.g. --param scene_tracks:=40)')
     parser.add_argument('--scene', default='room', help='scene drawn under the trajectories')
     parser.add_argument('--rate', type=float, default=1.0, help='playback rate (1.0)')
     parser.add_argument('--timeout', type=float, default=180.0,
@@ -178,8 +181,12 @@ def run(args: argparse.Namespace) -> int:
     processes: list[_Process] = []
     try:
         t = _step('2/5 start the localizer node')
-        node = _Process('localizer', [executable, '--ros-args', '-p', f'db:={db}'], env,
-                        out / 'localizer.log')
+        ros_args = ['--ros-args', '-p', f'db:={db}']
+        for item in args.param:
+            if ':=' not in item:
+                raise LocalizerError(f'--param {item!r}: expected NAME:=VALUE')
+            ros_args += ['-p', item]
+        node = _Process('localizer', [executable, *ros_args], env, out / 'localizer.log')
         processes.append(node)
         if not node.wait_for('localizer ready', args.timeout):
             raise LocalizerError(f'the localizer did not start; see {node.log}')
