@@ -55,6 +55,10 @@ AMBIGUITY_DISTANCE_M = 0.3
 AMBIGUITY_RATIO = 0.8
 #: Hypotheses refined (the strongest, at least ``AMBIGUITY_DISTANCE_M`` apart).
 CANDIDATES = 3
+#: Gauss-Newton stops when a step moves the position less than this (metres) and the
+#: heading less than ``STOP_RAD``.
+STOP_M = 1e-4
+STOP_RAD = 1e-5
 
 __all__ = ['AMBIGUITY_DISTANCE_M', 'AMBIGUITY_RATIO', 'CANDIDATES', 'CONFIDENCE', 'JUDGE_POINTS',
            'MAX_BATCHES', 'AbsolutePose', 'absolute_solution', 'base_rays', 'hypotheses',
@@ -242,7 +246,7 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
         state[2] = float(wrap_angle(state[2]))
         if not np.all(np.isfinite(state)):
             return None
-        if np.abs(delta[:2]).max() < 1e-5 and abs(delta[2]) < 1e-6:
+        if np.abs(delta[:2]).max() < STOP_M and abs(delta[2]) < STOP_RAD:
             break
     if info is None:
         return None
