@@ -83,6 +83,12 @@ def register(subparsers: Any) -> None:
                         help='cut a run after this many seconds (default: whole path)')
     parser.add_argument('--speed', type=float, default=0.4,
                         help='run top speed in m/s (default 0.4)')
+    parser.add_argument('--odometry', action='store_true',
+                        help='exploration: drive between the positions as a robot does, '
+                             'stopping for the images, and record /odom and odom -> '
+                             'base_link on /tf (the ground truth stays for judging)')
+    parser.add_argument('--drift', type=float, default=1.0, metavar='SCALE',
+                        help="multiplies the wheel odometry's errors (default 1; 0: none)")
     parser.add_argument('--snapshot', type=float, nargs=3, metavar=('X', 'Y', 'YAW'),
                         default=None,
                         help='write one image from pose (X, Y, YAW in degrees) as PNG to '
@@ -130,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
                    spacing=args.spacing,
                    seed=args.seed, encoding=args.encoding, compression=args.compressed,
                    jpeg_quality=args.jpeg_quality, effects=effects,
-                   run=RunParameters(max_speed=args.speed), duration=args.duration)
+                   run=RunParameters(max_speed=args.speed), duration=args.duration,
+                   odometry=args.odometry, drift=args.drift)
     if args.snapshot is not None:
         import cv2
 

@@ -9,7 +9,8 @@ topic                           type                           when
 ``/camera/image_raw/compressed`` ``sensor_msgs/CompressedImage`` every image (compressed)
 ``/camera/camera_info``         ``sensor_msgs/CameraInfo``     every image
 ``/ground_truth/pose``          ``geometry_msgs/PoseStamped``  every image, frame ``map``
-``/odom``                       ``nav_msgs/Odometry``          runs, 50 Hz, frame ``odom``
+``/odom``                       ``nav_msgs/Odometry``          runs and driven explorations,
+                                                               50 Hz, frame ``odom``
 ``/tf``                         ``tf2_msgs/TFMessage``         see below
 ``/tf_static``                  ``tf2_msgs/TFMessage``         once, ``base_link -> camera``
 ==============================  =============================  ==========================
@@ -20,6 +21,11 @@ bag. In a run bag it holds ``odom -> base_link`` with every odometry message and
 ground truth at the image times (a perfect localizer's output). Images, camera
 info and ground truth carry frame ``camera`` / ``map`` and the same stamp as
 their bag time; every header stamp equals the message's bag timestamp.
+
+A driven exploration (``odometry``: :mod:`.exploration_drive`) records what a real
+robot records: ``/odom`` and ``odom -> base_link`` on ``/tf`` at 50 Hz from the wheels
+(:mod:`.odometry`, its errors scaled by ``drift``), the images taken standing, and
+``/ground_truth/pose`` at every image for judging; no ``map`` frame on ``/tf``.
 
 Exploration: the robot stops at every pose of :func:`~.grid.exploration_poses`
 (one per second) and records one panorama at yaw 0, or pinhole images at evenly
@@ -52,6 +58,10 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects
 from visibility_builder.render.lens_view import make_renderer
 from visibility_builder.synthesis import messages
+from visibility_builder.synthesis.exploration_drive import (
+    DrivenExploration,
+    driven_exploration,
+)
 from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
 from visibility_builder.synthesis.trajectory import (
@@ -107,6 +117,9 @@ class BagSpec:
         run: planning and timing of runs.
         duration: cut runs after this many seconds (``None``: the whole path).
         odometry_noise: wheel-odometry error model.
+        odometry: an exploration driven between its positions, with wheel odometry
+            (:mod:`.exploration_drive`), instead of images placed at them.
+        drift: multiplies every error of ``odometry_noise`` (0: perfect odometry).
     """
 
     kind: str = 'exploration'
@@ -130,6 +143,8 @@ class BagSpec:
     run: RunParameters = field(default_factory=RunParameters)
     duration: float | None = None
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
+    odometry: bool = False
+    drift: float = 1.0
 
     def check(self) -> None:
         """Raise :class:`VisibilityBuilderError` for an invalid field."""
@@ -150,6 +165,10 @@ class BagSpec:
             raise VisibilityBuilderError(f'seed must be non-negative, got {self.seed}')
         if self.headings is not None and not 1 <= int(self.headings) <= 72:
             raise VisibilityBuilderError(f'headings must be 1..72, got {self.headings}')
+        if self.odometry and self.kind != 'exploration':
+            raise VisibilityBuilderError('odometry is for explorations (runs always have it)')
+        if not (math.isfinite(self.drift) and 0 <= self.drift <= 100):
+            raise VisibilityBuilderError(f'drift must be 0 to 100, got {self.drift}')
         if self.headings is not None and self.kind != 'exploration':
             raise VisibilityBuilderError('headings are for explorations only')
         for name in ('camera_pitch_deg', 'camera_roll_deg'):
@@ -167,6 +186,13 @@ class BagSpec:
             self.camera_model()
         except VbnCommonError as error:
             raise VisibilityBuilderError(str(error)) from None
+
+    def scaled_odometry_noise(self) -> OdometryNoise:
+        """Return the odometry error model with every error multiplied by ``drift``."""
+        noise = self.odometry_noise
+        return replace(noise, scale_error=noise.scale_error * self.drift,
+                       speed_noise=noise.speed_noise * self.drift,
+                       speed_noise_floor=noise.speed_noise_floor * self.drift)
 
     def mount_tilt(self) -> np.ndarray | None:
         """Return the mount's tilt (:func:`~vbn_common.geometry.mount.tilt_matrix`), or None."""
@@ -277,7 +303,13 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     if spec.camera_height is not None:
         scene = replace(scene, camera_height=float(spec.camera_height))
     # Plan before opening the bag: bad input must leave nothing behind.
-    if spec.kind == 'exploration':
+    driven = None
+    if spec.kind == 'exploration' and spec.odometry:
+        driven = driven_exploration(
+            scene, exploration_poses(scene, spec.spacing, spec.clearance),
+            spec.exploration_headings(), spec.run, spec.clearance)
+        frames, trajectory = [], driven.trajectory
+    elif spec.kind == 'exploration':
         frames = list(_camera_frames(spec, scene))
         trajectory = None
     else:
@@ -323,6 +355,8 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
                 if progress:
                     progress(index + 1, len(frames))
             images = len(frames)
+        elif driven is not None:
+            images = _write_driven(bag, driven, spec, write_image, progress)
         else:
             images = _write_run(bag, trajectory, spec, write_image, progress)
     duration = 0.0
@@ -332,6 +366,32 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
         duration = (frames[-1][0] - START_NS) / 1e9
     _LOG.debug('wrote %s: %d images, %.1f s', out, images, duration)
     return BagSummary(out, dict(sorted(bag.counts.items())), duration, images)
+
+
+def _write_driven(bag: _Bag, driven: DrivenExploration, spec: BagSpec,
+                  write_image: Callable[[int, int, np.ndarray], None],
+                  progress: Callable[[int, int], None] | None) -> int:
+    """Odometry and ``odom -> base_link`` every 20 ms, each image at its standing tick."""
+    odom = simulate_odometry(driven.trajectory, 1e9 / ODOM_PERIOD_NS,
+                             spec.scaled_odometry_noise(),
+                             np.random.default_rng([spec.seed, 1_000_003]))
+    period_s = ODOM_PERIOD_NS / 1e9
+    ticks = np.rint(driven.image_times / period_s).astype(np.int64)
+    if np.any(np.diff(ticks) <= 0) or ticks[-1] >= len(odom.times):
+        raise VisibilityBuilderError('exploration images closer than the odometry period')
+    image_at = {int(t): i for i, t in enumerate(ticks)}
+    for k in range(len(odom.times)):  # time order: odometry, then the image at the same stamp
+        stamp = START_NS + k * ODOM_PERIOD_NS
+        bag.write(names.ODOM, stamp, messages.odometry_message(
+            stamp, odom.poses[k], odom.twist[k], odom.pose_variance[k], odom.twist_variance))
+        bag.write(names.TF, stamp, messages.tf_message([messages.planar_transform(
+            stamp, names.ODOM_FRAME, names.BASE_FRAME, odom.poses[k])]))
+        i = image_at.get(k)
+        if i is not None:
+            write_image(i, stamp, driven.image_poses[i])
+            if progress:
+                progress(i + 1, len(ticks))
+    return len(ticks)
 
 
 def _write_run(bag: _Bag, trajectory: Trajectory, spec: BagSpec,
