@@ -1,0 +1,427 @@
+"""The poses of an exploration's images from the images and the odometry (thesis 6.1).
+
+Steps (each timed and counted in :class:`PoseEstimation`):
+
+1. **Stations.** Consecutive images whose odometry stands still (within
+   ``station_tolerance_m``) were taken at one place: they share one position unknown
+   (a robot turning through its headings), each keeps its own rotation.
+2. **Features**: SIFT of every image, with the builder's settings.
+3. **Pairs, first pass** (Algorithm 6.1, :mod:`.view_pairs`): each image with the
+   images of the next ``window`` stations, and with the other images of its station;
+   for a camera that does not see all around, only views whose odometry headings are
+   within the camera's field of each other.
+4. **Rotations** (6.1.3, :mod:`.rotations`) over the measured relative rotations and,
+   beside them, the odometry's turn between consecutive images (weighted by its own
+   uncertainty, so that views no image pair joins stay connected). Pairs whose rotation
+   disagrees with the fit by more than four of their standard deviations and four
+   robust standard deviations of all pairs' misses are dropped and the fit repeated.
+5. **Positions** (6.1.4, :mod:`.positions`): the directions carried into the world by
+   the fitted rotations; with the odometry's displacements between consecutive
+   stations beside them (its scale), outliers dropped.
+6. **Pairs, second pass**: the pairs of stations within ``radius_m`` of each other in
+   that estimate that the first pass did not try (the exploration's other rows, a
+   loop's return), measured, then rotations and positions fitted again over all.
+7. **The thesis's own result**: the positions from the directions alone (no odometry
+   rows), scaled by the length of the odometry's path: the result where the directions
+   fix every position; the joint solve (directions and odometry rows) fills in views
+   they leave free and chose the second pass's pairs.
+8. **Frame**: ``map`` is the odometry's frame at the first image (the first image's
+   estimated pose is its odometry pose; REP 105's ``map`` and ``odom`` start equal).
+
+Images are poses of ``base_link``: the camera's planar offset on the base (from the
+bag's ``base_link -> camera``) is undone. The result keeps the thesis-only estimate,
+the pairs with the reason each was dropped, and per-step times.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+import logging
+import math
+import time
+
+import numpy as np
+
+from vbn_common.exploration import Exploration
+from vbn_common.features import ImageFeatures, SiftConfig, extract_many
+from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.estimation.positions import fit_positions
+from visibility_builder.estimation.rotations import (
+    fit_rotations,
+    quat_conj,
+    quat_from_yaw,
+    quat_mul,
+    quat_to_matrix,
+    quat_yaw,
+)
+from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
+
+__all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_poses', 'matrix_to_quat']
+
+_LOG = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class EstimationSettings:
+    """Settings of :func:`estimate_poses`.
+
+    Attributes:
+        pairs: Matching and two-view settings.
+        sift: SIFT settings (the builder's).
+        window: First pass: each station is paired with the next ``window`` stations.
+        radius_m: Second pass: stations this close in the first estimate are paired.
+        station_tolerance_m: Consecutive images whose odometry moved less are one place.
+        odometry_std_per_m: Standard deviation of an odometry displacement per metre.
+        odometry_std_floor_m: ... added to every displacement, metres.
+        odometry_turn_std: Standard deviation of an odometry turn per radian turned.
+        odometry_yaw_drift_std: ... per metre driven, radians.
+        odometry_yaw_floor: ... added to every turn, radians.
+        max_rotation_error_deg: A pair whose rotation misses the fit by more than
+            this, four of its standard deviations and four robust standard deviations
+            of all pairs' misses is dropped.
+        max_direction_error_deg: A pair whose direction misses the fitted positions by
+            more is dropped.
+        workers: Processes for the feature extraction (None: every core).
+    """
+
+    pairs: PairSettings = PairSettings()
+    sift: SiftConfig = SiftConfig(n_octave_layers=5)
+    window: int = 4
+    radius_m: float = 0.75
+    station_tolerance_m: float = 0.01
+    odometry_std_per_m: float = 0.02
+    odometry_std_floor_m: float = 0.002
+    odometry_turn_std: float = 0.02
+    odometry_yaw_drift_std: float = 0.01
+    odometry_yaw_floor: float = 0.002
+    max_rotation_error_deg: float = 0.05
+    max_direction_error_deg: float = 10.0
+    workers: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.window < 1:
+            raise VisibilityBuilderError(f'window must be at least 1, got {self.window}')
+        for name in ('radius_m', 'station_tolerance_m', 'odometry_std_per_m',
+                     'odometry_std_floor_m', 'odometry_turn_std', 'odometry_yaw_floor',
+                     'max_rotation_error_deg', 'max_direction_error_deg'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise VisibilityBuilderError(f'{name} must be positive, got {value}')
+
+
+@dataclass
+class PoseEstimation:
+    """What :func:`estimate_poses` found.
+
+    Attributes:
+        base_poses: ``(n, 3)`` ``(x, y, yaw)`` of ``base_link`` in ``map`` per image:
+            :attr:`thesis_poses` where the directions fix them, else
+            :attr:`joint_poses` (NaN where neither reaches the image).
+        thesis_poses: the poses from the directions alone (6.1.4 as written), scaled
+            by the odometry's path length.
+        joint_poses: the poses from the directions and the odometry's displacements in
+            one system (held where the directions leave views free; less accurate
+            where both reach: the odometry's errors enter, measured 1.5 cm median
+            against 0.1 cm on the room).
+        odometry_poses: ``(n, 3)`` the odometry's poses of the images in ``map``.
+        stations: ``(n,)`` the place index of each image.
+        pairs: Every measured pair.
+        kept_rotation: ``(len(pairs),)`` bool, pairs the final rotation fit kept.
+        kept_direction: ``(len(pairs),)`` bool, pairs the final position fit kept.
+        tried: Pairs tried per pass, ``{'first': .., 'second': ..}``.
+        refused: Count of pairs refused per reason.
+        times: Seconds per step.
+        components: Station components the pairs join (the largest is estimated).
+    """
+
+    base_poses: np.ndarray
+    thesis_poses: np.ndarray
+    joint_poses: np.ndarray
+    odometry_poses: np.ndarray
+    stations: np.ndarray
+    pairs: list[PairMotion]
+    kept_rotation: np.ndarray
+    kept_direction: np.ndarray
+    tried: dict[str, int] = field(default_factory=dict)
+    refused: dict[str, int] = field(default_factory=dict)
+    times: dict[str, float] = field(default_factory=dict)
+    components: list[int] = field(default_factory=list)
+
+
+def matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """Return the unit quaternion ``(w, x, y, z)`` of a rotation matrix (Shepperd)."""
+    r = np.asarray(r, float)
+    trace = np.trace(r)
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    else:
+        k = int(np.argmax(np.diag(r)))
+        a, b = (k + 1) % 3, (k + 2) % 3
+        s = 2.0 * math.sqrt(max(1.0 + r[k, k] - r[a, a] - r[b, b], 1e-300))
+        q = [0.0] * 4
+        q[0] = (r[b, a] - r[a, b]) / s
+        q[1 + k] = 0.25 * s
+        q[1 + a] = (r[a, k] + r[k, a]) / s
+        q[1 + b] = (r[b, k] + r[k, b]) / s
+    q = np.array(q)
+    return q / np.linalg.norm(q)
+
+
+def _stations(odom: np.ndarray, tolerance: float) -> np.ndarray:
+    station = np.zeros(len(odom), np.int64)
+    start = 0
+    for k in range(1, len(odom)):
+        if np.linalg.norm(odom[k, :2] - odom[start, :2]) > tolerance:
+            start = k
+            station[k] = station[k - 1] + 1
+        else:
+            station[k] = station[k - 1]
+    return station
+
+
+def _field_deg(exploration: Exploration) -> float:
+    camera = exploration.camera_model()
+    if camera.kind == 'panoramic':
+        return 360.0
+    hfov = getattr(camera, 'hfov_deg', None)
+    if hfov is None:
+        info = exploration.camera_info
+        hfov = math.degrees(2.0 * math.atan2(0.5 * info.width, info.k[0]))
+    return float(hfov)
+
+
+class _Progress:
+    def __init__(self, callback: Callable[[str, int, int], None] | None) -> None:
+        self.callback = callback
+
+    def __call__(self, step: str, done: int, total: int) -> None:
+        if self.callback is not None:
+            self.callback(step, done, total)
+
+
+def estimate_poses(exploration: Exploration, settings: EstimationSettings = EstimationSettings(),
+                   progress: Callable[[str, int, int], None] | None = None,
+                   features: list[ImageFeatures] | None = None) -> PoseEstimation:
+    """Estimate every image's pose from the images and the odometry (module docstring).
+
+    Args:
+        exploration: The exploration read with its odometry as the pose source (its
+            ``base_pose`` the odometry's, in ``odom``).
+        settings: See :class:`EstimationSettings`.
+        progress: Called as ``(step, done, total)``.
+        features: The images' SIFT features when already extracted.
+
+    Returns:
+        The estimate (see :class:`PoseEstimation`).
+
+    Raises:
+        VisibilityBuilderError: fewer than two images, or no pair of images that
+            overlap.
+    """
+    report = _Progress(progress)
+    times: dict[str, float] = {}
+    n = len(exploration.frames)
+    if n < 2:
+        raise VisibilityBuilderError(f'{n} image(s): pose estimation needs at least two')
+    odom_base = exploration.base_poses()
+    odom_cam = exploration.camera_poses()
+    mount = compose_poses(invert_pose(odom_base[0]), odom_cam[0])   # camera on the base
+    t = time.perf_counter()
+    station = _stations(odom_base, settings.station_tolerance_m)
+    times['stations'] = time.perf_counter() - t
+    t = time.perf_counter()
+    if features is None:
+        extracted = extract_many([f.image for f in exploration.frames], settings.sift,
+                                 settings.workers,
+                                 progress=lambda k, c=[0]: (c.__setitem__(0, c[0] + k),
+                                                            report('features', c[0], n)))
+        bad = [r for r in extracted if isinstance(r, str)]
+        if bad:
+            raise VisibilityBuilderError(f'{len(bad)} image(s) cannot be decoded: {bad[0]}')
+        features = [r for r in extracted if not isinstance(r, str)]
+    times['features'] = time.perf_counter() - t
+    camera = exploration.camera_model()
+    field_deg = _field_deg(exploration)
+    refused: dict[str, int] = {}
+    measured: dict[tuple[int, int], PairMotion] = {}
+    tried: dict[str, int] = {}
+
+    def measure(candidates: list[tuple[int, int]], name: str) -> None:
+        t0 = time.perf_counter()
+        todo = [c for c in candidates if c not in measured and (c[1], c[0]) not in measured]
+        tried[name] = len(todo)
+        for k, (i, j) in enumerate(todo):
+            motion, why = measure_pair(i, j, features[i], features[j], camera, settings.pairs)
+            if motion is None:
+                key = why.split(':')[0] if ':' in why else why.split(' ', 1)[-1]
+                refused[key] = refused.get(key, 0) + 1
+            else:
+                measured[(i, j)] = motion
+            report(f'pairs ({name})', k + 1, len(todo))
+        times[f'pairs ({name})'] = time.perf_counter() - t0
+
+    # First pass: near in time.
+    first = []
+    for i in range(n):
+        for j in range(i + 1, n):
+            gap = station[j] - station[i]
+            if gap > settings.window:
+                break
+            if field_deg < 360.0 and abs(wrap_angle(odom_cam[j, 2] - odom_cam[i, 2])) > \
+                    math.radians(field_deg):
+                continue
+            first.append((i, j))
+    measure(first, 'first')
+    if not measured:
+        raise VisibilityBuilderError('no two images overlap: no pair of images has '
+                                     f'{settings.pairs.min_matches} matches that one motion '
+                                     'explains')
+    t = time.perf_counter()
+    fit = _fit(n, station, odom_base, mount, measured, settings)
+    times['fit (first)'] = time.perf_counter() - t
+    # Second pass: near in space.
+    cam = fit['camera']
+    second = []
+    for i in range(n):
+        if not np.all(np.isfinite(cam[i])):
+            continue
+        near = np.linalg.norm(cam[:, :2] - cam[i, :2], axis=1) <= settings.radius_m
+        for j in np.flatnonzero(near):
+            j = int(j)
+            if j <= i or station[j] - station[i] <= settings.window:
+                continue
+            if field_deg < 360.0 and abs(wrap_angle(cam[j, 2] - cam[i, 2])) > \
+                    math.radians(0.5 * field_deg):
+                continue
+            second.append((i, j))
+    measure(second, 'second')
+    t = time.perf_counter()
+    fit = _fit(n, station, odom_base, mount, measured, settings)
+    times['fit (final)'] = time.perf_counter() - t
+    pairs = list(measured.values())
+    joint = np.array([compose_poses(c, invert_pose(mount)) if np.all(np.isfinite(c))
+                      else np.full(3, np.nan) for c in fit['camera']])
+    thesis = np.array([compose_poses(c, invert_pose(mount)) if np.all(np.isfinite(c))
+                       else np.full(3, np.nan) for c in fit['thesis']])
+    base = np.where(np.isfinite(thesis).all(axis=1)[:, None], thesis, joint)
+    return PoseEstimation(base, thesis, joint, odom_base.copy(), station, pairs,
+                          fit['kept_rotation'], fit['kept_direction'], tried, refused, times,
+                          fit['components'])
+
+
+def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
+         measured: dict[tuple[int, int], PairMotion], settings: EstimationSettings
+         ) -> dict[str, object]:
+    """Rotations, then positions (with and without odometry), in the ``map`` frame."""
+    pairs = list(measured.values())
+    odom_cam = np.array([compose_poses(p, mount) for p in odom_base])
+    # -- rotations (6.1.3): image pairs plus the odometry's turns ---------------------------
+    ij = np.array([(p.i, p.j) for p in pairs], np.int64).reshape(-1, 2)
+    rel = np.array([matrix_to_quat(p.rotation) for p in pairs]).reshape(-1, 4)
+    w = np.array([1.0 / p.rotation_std ** 2 for p in pairs])
+    turn = wrap_angle(np.diff(odom_cam[:, 2]))
+    driven = np.linalg.norm(np.diff(odom_base[:, :2], axis=0), axis=1)
+    odo_std = settings.odometry_yaw_floor + settings.odometry_turn_std * np.abs(turn) + \
+        settings.odometry_yaw_drift_std * driven
+    odo_ij = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
+    odo_rel = quat_from_yaw(-turn)             # camera i's planar frame into i+1's
+    kept = np.ones(len(pairs), bool)
+    for _ in range(6):
+        all_ij = np.concatenate([ij[kept], odo_ij])
+        all_rel = np.concatenate([rel[kept], odo_rel])
+        all_w = np.concatenate([w[kept], 1.0 / odo_std ** 2])
+        rot = fit_rotations(n, all_ij, all_rel, all_w, anchor=0)
+        error = np.full(len(pairs), 0.0)
+        if len(pairs):
+            q = rot.quaternions
+            err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
+            error = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
+        std = np.array([p.rotation_std for p in pairs])
+        # Outliers: beyond 4 of their own standard deviations and 4 robust standard
+        # deviations of the kept pairs' errors (a wrong mode of a solver can be tens of
+        # times off its claimed precision and yet within a fixed threshold).
+        spread = 4.0 * 1.4826 * float(np.median(error[kept])) if kept.any() else 0.0
+        bad = kept & (error > np.maximum(4.0 * std, max(
+            spread, math.radians(settings.max_rotation_error_deg))))
+        if not bad.any():
+            break
+        kept &= ~bad
+    # The fit's world is camera 0's planar frame; map -> camera 0 is its odometry heading:
+    # q_i then rotates map into camera i's frame, and yaw_i = -angle about z.
+    q = quat_mul(rot.quaternions, quat_from_yaw(-odom_cam[0, 2]))
+    yaw = -quat_yaw(q)
+    to_world = np.transpose(quat_to_matrix(q), (0, 2, 1))   # camera i's frame into map
+    # -- positions (6.1.4) over stations -----------------------------------------------------
+    has_dir = np.array([p.has_direction for p in pairs], bool) & kept
+    idx = np.flatnonzero(has_dir & (station[ij[:, 0]] != station[ij[:, 1]])) \
+        if len(pairs) else np.zeros(0, np.int64)
+    s_ij = station[ij[idx]] if len(idx) else np.zeros((0, 2), np.int64)
+    dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx]).reshape(-1, 3)
+    planar = all(pairs[k].method != 'general_essential' for k in idx)
+    d = 2 if planar else 3
+    dirs = dirs[:, :d]
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-12)
+    n_st = int(station.max()) + 1
+    first_of = np.array([np.flatnonzero(station == s)[0] for s in range(n_st)])
+    st_odom = odom_base[first_of]
+    length = np.linalg.norm(st_odom[s_ij[:, 1], :2] - st_odom[s_ij[:, 0], :2], axis=1) \
+        if len(idx) else np.zeros(0)
+    dstd = np.array([pairs[k].direction_std for k in idx])
+    w_dir = 1.0 / (np.maximum(dstd, 1e-4) * np.maximum(length, 0.05)) ** 2
+    # Odometry displacements between consecutive stations, into the world frame.
+    a_st, b_st = np.arange(n_st - 1), np.arange(1, n_st)
+    delta = st_odom[b_st, :2] - st_odom[a_st, :2]
+    base_yaw_est = yaw[first_of] - mount[2]
+    turn_to_world = base_yaw_est[a_st] - st_odom[a_st, 2]
+    c, s = np.cos(turn_to_world), np.sin(turn_to_world)
+    disp = np.stack([c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]], 1)
+    if d == 3:
+        disp = np.concatenate([disp, np.zeros((len(disp), 1))], axis=1)
+    o_std = settings.odometry_std_floor_m + settings.odometry_std_per_m * \
+        np.linalg.norm(delta, axis=1)
+    odometry = (np.stack([a_st, b_st], 1), disp, 1.0 / o_std ** 2)
+    max_angle = math.radians(settings.max_direction_error_deg)
+    combined = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, odometry=odometry,
+                             max_angle=max_angle)
+    kept_direction = np.zeros(len(pairs), bool)
+    kept_direction[idx[combined.kept]] = True
+    # The thesis's system: directions alone, scaled by the odometry's path length.
+    thesis_pos = np.full((n_st, d), np.nan)
+    if len(idx):
+        try:
+            alone = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, max_angle=max_angle)
+            steps = np.linalg.norm(np.diff(alone.positions[:, :2], axis=0), axis=1)
+            odo_steps = np.linalg.norm(delta, axis=1)
+            ok = np.isfinite(steps)
+            if ok.any() and steps[ok].sum() > 0:
+                thesis_pos = alone.positions * (odo_steps[ok].sum() / steps[ok].sum())
+        except VisibilityBuilderError as error:
+            _LOG.warning('positions from the directions alone: %s', error)
+    components = _components(n_st, s_ij[combined.kept] if len(idx) else s_ij)
+    origin = odom_cam[0, :2]
+
+    def place(positions: np.ndarray) -> np.ndarray:
+        out = np.full((n, 3), np.nan)
+        xy = positions[station, :2] + origin
+        out[:, :2] = xy
+        out[:, 2] = wrap_angle(yaw)
+        out[~np.isfinite(xy).all(axis=1)] = np.nan
+        return out
+
+    # Positions are the cameras' (mount included): the first camera at its odometry pose.
+    return {'camera': place(combined.positions), 'thesis': place(thesis_pos),
+            'kept_rotation': kept, 'kept_direction': kept_direction,
+            'components': components}
+
+
+def _components(n: int, edges: np.ndarray) -> list[int]:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    if len(edges) == 0:
+        return [1] * n
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    return sorted(np.bincount(labels, minlength=count).tolist(), reverse=True)
