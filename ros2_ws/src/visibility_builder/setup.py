@@ -28,6 +28,7 @@ setup(
             'render = visibility_builder.cli.render:register',
             'build = visibility_builder.cli.build:register',
             'bench-build = visibility_builder.cli.bench_build:register',
+            'estimate-poses = visibility_builder.cli.estimate_poses:register',
         ],
     },
 )

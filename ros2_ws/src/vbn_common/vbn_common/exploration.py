@@ -48,7 +48,7 @@ mid-bag are warnings; the frames are kept.
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import logging
 import math
 import os
@@ -66,6 +66,7 @@ from vbn_common.names import (
     BASE_FRAME,
     CAMERA_FRAME,
     CAMERA_INFO,
+    ESTIMATED_POSE,
     GROUND_TRUTH_POSE,
     IMAGE_TOPICS,
     MAP_FRAME,
@@ -94,7 +95,9 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 #: Image topics tried in this order when ``ReadConfig.image_topic`` is ``None``.
-POSE_SOURCES = ('auto', 'ground_truth', 'tf')
+#: Pose sources read from a pose topic (the others from /tf).
+_POSE_TOPIC_SOURCES = ('ground_truth', 'estimated')
+POSE_SOURCES = ('auto', 'ground_truth', 'estimated', 'tf')
 #: Keys of :attr:`Exploration.skipped`.
 SKIP_REASONS = ('bad_image', 'no_pose', 'invalid_pose')
 
@@ -115,8 +118,10 @@ class ReadConfig:
             has images there, else ``/camera/image_raw/compressed``.
         camera_info_topic: the ``sensor_msgs/CameraInfo`` topic.
         pose_topic: the ground-truth pose topic (pose of ``base_frame`` in ``map_frame``).
-        pose_source: ``'auto'`` (ground truth if the bag has it, else ``/tf``),
-            ``'ground_truth'`` or ``'tf'``.
+        pose_source: ``'auto'`` (ground truth if the bag has it, else ``/estimated/pose``,
+            else ``/tf``),
+            ``'ground_truth'``, ``'estimated'`` (``/estimated/pose``, written by ``vbn
+            estimate-poses``) or ``'tf'``.
         pose_tolerance_s: largest time between an image and the pose (or each
             ``/tf`` link) it gets, seconds.
         map_frame: the fixed frame.
@@ -219,7 +224,7 @@ class Exploration:
     Attributes:
         frames: the usable images in bag order.
         camera_info: the calibration (the bag's first camera info).
-        pose_source: ``'ground_truth'`` or ``'tf'``.
+        pose_source: ``'ground_truth'``, ``'estimated'`` or ``'tf'``.
         frame_ids: ``{'map': ..., 'base': ..., 'camera': ...}`` as used.
         topics: ``{'image': ..., 'camera_info': ..., 'pose': ...}`` as read
             (``'pose'`` is ``'/tf'`` for the tf source).
@@ -309,10 +314,12 @@ def read_exploration(bag_path: str | os.PathLike[str],
             raise VbnCommonError(
                 f'bag {path} has no camera info: no messages on {config.camera_info_topic}')
         source = _pose_source(path, counts, config)
+        if source == 'estimated':   # read like the ground truth, from its own topic
+            config = replace(config, pose_topic=ESTIMATED_POSE)
         topics = [image_topic, config.camera_info_topic]
-        topics += [config.pose_topic] if source == 'ground_truth' else [_TF]
+        topics += [config.pose_topic] if source in _POSE_TOPIC_SOURCES else [_TF]
         topics += [_TF_STATIC] if counts.get(_TF_STATIC) else []
-        if source == 'ground_truth' and counts.get(_TF):  # base_link -> camera may be there
+        if source in _POSE_TOPIC_SOURCES and counts.get(_TF):  # base_link -> camera there?
             topics.append(_TF)
         for topic in topics[1:]:
             allowed = {config.camera_info_topic: _INFO_TYPES, config.pose_topic: _POSE_TYPES,
@@ -351,12 +358,18 @@ def _pose_source(path: Path, counts: dict[str, int], config: ReadConfig) -> str:
     if config.pose_source == 'ground_truth' and not has_truth:
         raise VbnCommonError(
             f'bag {path} has no ground truth: no messages on {config.pose_topic}')
+    has_estimate = bool(counts.get(ESTIMATED_POSE))
+    if config.pose_source == 'estimated' and not has_estimate:
+        raise VbnCommonError(f'bag {path} has no estimated poses: no messages on '
+                             f'{ESTIMATED_POSE} (vbn estimate-poses writes them)')
     if config.pose_source == 'tf' and not has_tf:
         raise VbnCommonError(f'bag {path} has no pose source: no messages on {_TF}')
     if config.pose_source != 'auto':
         return config.pose_source
     if has_truth:
         return 'ground_truth'
+    if has_estimate:
+        return 'estimated'
     if has_tf:
         return 'tf'
     raise VbnCommonError(
@@ -456,7 +469,7 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
         warn(f'/tf gives more than one parent to {", ".join(sorted(data.tf.conflicts))}; '
              'using the first')
 
-    if source == 'ground_truth':
+    if source in _POSE_TOPIC_SOURCES:
         base_r, base_t, found = _ground_truth(path, data, stamps, tolerance_ns, config, warn)
         pose_topic = config.pose_topic
     else:

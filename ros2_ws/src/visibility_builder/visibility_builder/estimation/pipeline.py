@@ -86,7 +86,7 @@ class EstimationSettings:
     """
 
     pairs: PairSettings = PairSettings()
-    sift: SiftConfig = SiftConfig(n_octave_layers=5)
+    sift: SiftConfig = SiftConfig(n_octave_layers=5, precise_upscale=True)
     window: int = 4
     radius_m: float = 0.75
     station_tolerance_m: float = 0.01

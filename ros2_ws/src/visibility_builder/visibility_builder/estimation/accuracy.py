@@ -1,0 +1,72 @@
+"""Estimated image poses judged against the ground truth, after an SE(2) alignment.
+
+Estimated poses live in a frame of their own (the odometry's at the first image), so
+they are compared with the truth as evo and SfM benchmarks compare trajectories: the
+rigid planar motion that best maps the estimated positions onto the true ones (Umeyama
+without scale, least squares) is applied first.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vbn_common.geometry.frames import wrap_angle
+
+__all__ = ['PoseErrors', 'align_se2', 'pose_errors']
+
+
+@dataclass(frozen=True)
+class PoseErrors:
+    """Errors of estimated poses against the truth (metres, degrees)."""
+
+    count: int
+    position_median: float
+    position_p95: float
+    position_max: float
+    heading_median_deg: float
+    heading_max_deg: float
+
+    def line(self) -> str:
+        """Return the figures as one line."""
+        return (f'{self.count} poses: position median {100 * self.position_median:.2f} cm, '
+                f'p95 {100 * self.position_p95:.2f} cm, max {100 * self.position_max:.2f} cm;'
+                f' heading median {self.heading_median_deg:.3f} deg, max '
+                f'{self.heading_max_deg:.3f} deg')
+
+
+def align_se2(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Return ``estimate`` (n, 3) moved by the planar rigid motion that best fits ``truth``.
+
+    Rows with NaN in either are ignored for the fit and stay NaN.
+    """
+    estimate = np.asarray(estimate, float)
+    truth = np.asarray(truth, float)
+    ok = np.isfinite(estimate).all(axis=1) & np.isfinite(truth).all(axis=1)
+    out = np.full_like(estimate, np.nan)
+    if ok.sum() < 2:
+        return out
+    a, b = estimate[ok, :2], truth[ok, :2]
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    u, _, vt = np.linalg.svd((a - ma).T @ (b - mb))
+    d = np.sign(np.linalg.det(vt.T @ u.T))
+    r = vt.T @ np.diag([1.0, d]) @ u.T
+    angle = float(np.arctan2(r[1, 0], r[0, 0]))
+    good = np.isfinite(estimate).all(axis=1)
+    out[good, :2] = (estimate[good, :2] - ma) @ r.T + mb
+    out[good, 2] = wrap_angle(estimate[good, 2] + angle)
+    return out
+
+
+def pose_errors(estimate: np.ndarray, truth: np.ndarray, align: bool = True) -> PoseErrors:
+    """Position and heading errors of ``estimate`` against ``truth`` (aligned first)."""
+    moved = align_se2(estimate, truth) if align else np.asarray(estimate, float)
+    ok = np.isfinite(moved).all(axis=1) & np.isfinite(truth).all(axis=1)
+    if not ok.any():
+        nan = float('nan')
+        return PoseErrors(0, nan, nan, nan, nan, nan)
+    position = np.linalg.norm(moved[ok, :2] - truth[ok, :2], axis=1)
+    heading = np.degrees(np.abs(wrap_angle(moved[ok, 2] - truth[ok, 2])))
+    return PoseErrors(int(ok.sum()), float(np.median(position)),
+                      float(np.percentile(position, 95)), float(position.max()),
+                      float(np.median(heading)), float(heading.max()))

@@ -1,0 +1,83 @@
+"""``vbn estimate-poses`` on a driven exploration, and ``vbn build`` on its estimated poses."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from landmark_db.cli.main import main as vbn_main
+from landmark_db.scenes import resolve_scene
+from vbn_common.bags import open_bag
+from vbn_common.exploration import ReadConfig, read_exploration
+from visibility_builder.estimation.accuracy import pose_errors
+from visibility_builder.synthesis.bags import BagSpec, write_bag
+
+
+@pytest.fixture(scope='module')
+def driven(tmp_path_factory):
+    """A 0.5 m driven exploration of the room at three times the default drift."""
+    path = tmp_path_factory.mktemp('driven') / 'room_driven'
+    write_bag(resolve_scene('room'), BagSpec(kind='exploration', camera='panoramic',
+                                             spacing=0.5, odometry=True, drift=3.0, seed=4,
+                                             compression='jpeg'), path)
+    return path
+
+
+@pytest.fixture(scope='module')
+def estimated(driven, tmp_path_factory):
+    out = tmp_path_factory.mktemp('estimated') / 'room_estimated'
+    figures = out.parent / 'figures.json'
+    assert vbn_main(['estimate-poses', str(driven), '--out', str(out), '--radius', '1.2',
+                     '--json', str(figures), '--quiet']) == 0
+    return out, json.loads(figures.read_text())
+
+
+def test_poses_from_images_and_odometry_beat_the_odometry(driven, estimated) -> None:
+    out, figures = estimated
+    n = figures['images']
+    assert figures['estimated'] == figures['written'] == n
+    # judged against the ground truth (after an SE(2) alignment); the scale is the
+    # odometry's path length, whose wheels are off by about 1 % at three times the drift
+    assert figures['result']['position_median'] < 0.02
+    assert figures['result']['position_max'] < 0.05
+    assert figures['result']['heading_median_deg'] < 0.2
+    assert figures['odometry']['position_median'] > 5 * figures['result']['position_median']
+    # the output bag: every input topic copied, /estimated/pose added per image
+    with open_bag(driven) as a, open_bag(out) as b:
+        for name, info in a.topics.items():
+            assert b.topics[name].count == info.count
+            assert b.topics[name].msgtype == info.msgtype
+        assert b.topics['/estimated/pose'].count == n
+    truth = read_exploration(out, ReadConfig(pose_source='ground_truth')).base_poses()
+    mine = read_exploration(out, ReadConfig(pose_source='estimated'))
+    assert mine.pose_source == 'estimated'
+    errors = pose_errors(mine.base_poses(), truth)
+    assert errors.count == n and errors.position_median < 0.02
+    # frame: map is the odometry's at the first image
+    odom = read_exploration(driven, ReadConfig(pose_source='tf', map_frame='odom'))
+    assert mine.base_poses()[0] == pytest.approx(odom.base_poses()[0], abs=1e-6)
+
+
+def test_build_reads_the_estimated_poses(estimated, tmp_path) -> None:
+    out, _ = estimated
+    db = tmp_path / 'room.db'
+    assert vbn_main(['build', str(out), '--db', str(db), '--set',
+                     'read.pose_source=estimated', '--quiet']) == 0
+    assert db.is_file()
+
+
+def test_bad_input_is_one_line_and_writes_nothing(driven, tmp_path, capsys) -> None:
+    plain = tmp_path / 'plain'
+    write_bag(resolve_scene('room'), BagSpec(kind='exploration', width=128, height=32,
+                                             spacing=1.5), plain)
+    for argv, message in (
+            (['estimate-poses', str(plain), '--out', str(tmp_path / 'a')], 'no odometry'),
+            (['estimate-poses', str(driven), '--out', str(driven)], 'exists already'),
+            (['estimate-poses', str(tmp_path / 'missing'), '--out', str(tmp_path / 'b')],
+             'missing')):
+        assert vbn_main(argv) != 0
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0] and 'Traceback' not in err[0]
+    assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()
+    assert not np.any([p.name.startswith('.') for p in tmp_path.iterdir()])
