@@ -47,6 +47,12 @@ from vbn_common.features import ImageFeatures, SiftConfig, extract_many
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.estimation.positions import fit_positions
+from visibility_builder.estimation.refinement import (
+    RefinementResult,
+    RefinementSettings,
+    refine_poses,
+    tracks_from_pairs,
+)
 from visibility_builder.estimation.rotations import (
     fit_rotations,
     quat_conj,
@@ -82,6 +88,8 @@ class EstimationSettings:
             of all pairs' misses is dropped.
         max_direction_error_deg: A pair whose direction misses the fitted positions by
             more is dropped.
+        refine: Bundle-adjust the result (:mod:`.refinement`).
+        refinement: Its settings.
         workers: Processes for the feature extraction (None: every core).
     """
 
@@ -97,6 +105,8 @@ class EstimationSettings:
     odometry_yaw_floor: float = 0.002
     max_rotation_error_deg: float = 0.05
     max_direction_error_deg: float = 10.0
+    refine: bool = True
+    refinement: RefinementSettings = RefinementSettings()
     workers: int | None = None
 
     def __post_init__(self) -> None:
@@ -116,7 +126,9 @@ class PoseEstimation:
 
     Attributes:
         base_poses: ``(n, 3)`` ``(x, y, yaw)`` of ``base_link`` in ``map`` per image:
-            :attr:`thesis_poses` where the directions fix them, else
+            the bundle adjustment's (:mod:`.refinement`), or :attr:`unrefined_poses`
+            without it.
+        unrefined_poses: :attr:`thesis_poses` where the directions fix them, else
             :attr:`joint_poses` (NaN where neither reaches the image).
         thesis_poses: the poses from the directions alone (6.1.4 as written), scaled
             by the odometry's path length.
@@ -133,11 +145,13 @@ class PoseEstimation:
         refused: Count of pairs refused per reason.
         times: Seconds per step.
         components: Station components the pairs join (the largest is estimated).
+        refinement: The bundle adjustment's figures (None without it).
     """
 
     base_poses: np.ndarray
     thesis_poses: np.ndarray
     joint_poses: np.ndarray
+    unrefined_poses: np.ndarray
     odometry_poses: np.ndarray
     stations: np.ndarray
     pairs: list[PairMotion]
@@ -147,6 +161,7 @@ class PoseEstimation:
     refused: dict[str, int] = field(default_factory=dict)
     times: dict[str, float] = field(default_factory=dict)
     components: list[int] = field(default_factory=list)
+    refinement: RefinementResult | None = None
 
 
 def matrix_to_quat(r: np.ndarray) -> np.ndarray:
@@ -301,14 +316,22 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     fit = _fit(n, station, odom_base, mount, measured, settings)
     times['fit (final)'] = time.perf_counter() - t
     pairs = list(measured.values())
+    refined = None
+    if settings.refine:
+        t = time.perf_counter()
+        refined = _refine(fit, pairs, features, camera, odom_cam, settings)
+        times['refine'] = time.perf_counter() - t
     joint = np.array([compose_poses(c, invert_pose(mount)) if np.all(np.isfinite(c))
                       else np.full(3, np.nan) for c in fit['camera']])
     thesis = np.array([compose_poses(c, invert_pose(mount)) if np.all(np.isfinite(c))
                        else np.full(3, np.nan) for c in fit['thesis']])
-    base = np.where(np.isfinite(thesis).all(axis=1)[:, None], thesis, joint)
-    return PoseEstimation(base, thesis, joint, odom_base.copy(), station, pairs,
+    unrefined = np.where(np.isfinite(thesis).all(axis=1)[:, None], thesis, joint)
+    base = unrefined
+    if refined is not None:
+        base = np.array([compose_poses(c, invert_pose(mount)) for c in refined.camera_poses])
+    return PoseEstimation(base, thesis, joint, unrefined, odom_base.copy(), station, pairs,
                           fit['kept_rotation'], fit['kept_direction'], tried, refused, times,
-                          fit['components'])
+                          fit['components'], refined)
 
 
 def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
@@ -414,6 +437,49 @@ def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
     return {'camera': place(combined.positions), 'thesis': place(thesis_pos),
             'kept_rotation': kept, 'kept_direction': kept_direction,
             'components': components}
+
+
+_OPTICAL_TO_PLANAR = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[ImageFeatures],
+            camera: object, odom_cam: np.ndarray, settings: EstimationSettings
+            ) -> RefinementResult | None:
+    """Bundle-adjust the fitted camera poses over the kept pairs' tracks and the odometry."""
+    start = np.asarray(fit['thesis'], float)
+    start = np.where(np.isfinite(start).all(axis=1)[:, None], start, fit['camera'])
+    if not np.isfinite(start).all():
+        _LOG.warning('refinement skipped: some images have no pose to start from')
+        return None
+    kept = np.asarray(fit['kept_rotation'], bool)
+    chosen = [p for p, k in zip(pairs, kept, strict=True) if k and len(p.features)]
+    if not chosen:
+        return None
+    rows, _ = tracks_from_pairs([len(f) for f in features],
+                                np.array([(p.i, p.j) for p in chosen], np.int64),
+                                [np.asarray(p.features, np.int64).reshape(-1, 2)
+                                 for p in chosen])
+    if not len(rows):
+        return None
+    uv = np.concatenate([features[i].keypoints[rows[rows[:, 1] == i, 2]]
+                         for i in range(len(features))])
+    order = np.concatenate([np.flatnonzero(rows[:, 1] == i) for i in range(len(features))])
+    rows = rows[order]
+    rays = camera.unproject(uv.astype(float)) @ _OPTICAL_TO_PLANAR.T
+    n = len(features)
+    rel = np.array([compose_poses(invert_pose(odom_cam[i]), odom_cam[i + 1])
+                    for i in range(n - 1)]).reshape(-1, 3)
+    dist = np.linalg.norm(rel[:, :2], axis=1)
+    sig_xy = settings.odometry_std_floor_m + settings.odometry_std_per_m * dist
+    sig_yaw = settings.odometry_yaw_floor + settings.odometry_turn_std * np.abs(rel[:, 2]) + \
+        settings.odometry_yaw_drift_std * dist
+    odometry = (np.stack([np.arange(n - 1), np.arange(1, n)], axis=1), rel,
+                np.stack([sig_xy, sig_xy, sig_yaw], axis=1))
+    try:
+        return refine_poses(start, rows[:, :2], rays, camera, odometry, settings.refinement)
+    except VisibilityBuilderError as error:
+        _LOG.warning('refinement skipped: %s', error)
+        return None
 
 
 def _components(n: int, edges: np.ndarray) -> list[int]:

@@ -23,7 +23,7 @@ turning on the spot) have no direction between them: the solvers refuse them and
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 import math
 
 import numpy as np
@@ -77,6 +77,8 @@ class PairMotion:
         inliers: Matches the solver kept.
         residual: RMS angular error of the inliers, radians.
         method: The solver.
+        features: ``(inliers, 2)`` the inlier matches' feature indices in ``i`` and ``j``
+            (the tracks of the refinement).
     """
 
     i: int
@@ -89,6 +91,7 @@ class PairMotion:
     inliers: int
     residual: float
     method: str
+    features: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
 
     @property
     def has_direction(self) -> bool:
@@ -123,7 +126,10 @@ def measure_pair(i: int, j: int, a: ImageFeatures, b: ImageFeatures, camera: Cam
                                  config=settings.two_view, rng=rng)
     except VbnCommonError as error:
         if 'same place' in str(error):
-            return rotation_only(i, j, uv_a, uv_b, camera, settings)
+            motion, why = rotation_only(i, j, uv_a, uv_b, camera, settings)
+            if motion is not None:
+                motion = replace(motion, features=pairs[motion.features])
+            return motion, why
         return None, str(error)
     inliers = int(motion.inliers.sum())
     if inliers < settings.min_inliers:
@@ -137,7 +143,8 @@ def measure_pair(i: int, j: int, a: ImageFeatures, b: ImageFeatures, camera: Cam
     direction /= np.linalg.norm(direction)
     return PairMotion(i, j, np.asarray(motion.rotation, float), direction,
                       factor * max(rot_std, 1e-5), factor * max(dir_std, 1e-5), len(pairs),
-                      inliers, float(motion.residual), motion.method), ''
+                      inliers, float(motion.residual), motion.method,
+                      pairs[np.asarray(motion.inliers, bool)]), ''
 
 
 def rotation_only(i: int, j: int, uv_a: np.ndarray, uv_b: np.ndarray, camera: CameraModel,
@@ -172,7 +179,8 @@ def rotation_only(i: int, j: int, uv_a: np.ndarray, uv_b: np.ndarray, camera: Ca
     noise = max(residual, settings.two_view.noise_floor_px / f)
     std = _inflation(n, int(inliers.sum())) * noise / math.sqrt(int(inliers.sum()))
     return PairMotion(i, j, rotation, np.full(3, np.nan), std, math.inf, n,
-                      int(inliers.sum()), residual, 'rotation_only'), ''
+                      int(inliers.sum()), residual, 'rotation_only',
+                      np.flatnonzero(inliers)), ''
 
 
 def _kabsch(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -1,0 +1,297 @@
+"""Bundle adjustment of the estimated poses with odometry factors (beyond the thesis).
+
+Issue 17, point 4. Section 6.1 fits rotations, then positions, to pairwise motions: each
+pair's motion is a summary of its matches, and the two fits never see the points
+themselves. The refinement minimises the reprojection errors of every track (a chain
+of pairwise inlier matches joined by union-find, at most one feature per image) over all
+image poses and all points at once, with
+
+- the odometry as relative-pose factors between consecutive images (its standard
+  deviations as in :class:`~.pipeline.EstimationSettings`: the scale comes from it),
+- for a robot on a floor, the planar constraint: each pose's height, roll and pitch held
+  at zero by a tight prior (its position and heading free),
+- the first image's pose fixed (the ``map`` frame of :mod:`.pipeline`).
+
+**Library: GTSAM** (``gtsam`` 4.3, pinned in ``requirements.in``), chosen over
+pycolmap's bundle adjustment and pyceres because its factors are what this problem is:
+``BetweenFactorPose3`` for odometry and ``PriorFactorPose3`` for the planar constraint
+come with it, and its projection factor runs in C++ (pyceres's Python cost functions and
+GTSAM's ``CustomFactor`` call Python per residual). COLMAP has no model for a cylindrical
+panorama. Every camera model of the project is reduced to unit rays (``unproject``), and
+each ray is measured by GTSAM's ``GenericProjectionFactorCal3_S2`` through a virtual
+pinhole on the body (``body_P_sensor``) that looks along the nearest of eight azimuths:
+the rays of a panorama, a fisheye or a pinhole all become pinhole measurements within
+22.5 degrees of a virtual optical axis, in pixels of the real camera's angular
+resolution. Residuals are robust (Huber, ``huber_px``); observations still more than
+``outlier_px`` off after a first solve are removed and the problem solved again.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from vbn_common.geometry.camera import CameraModel, pixels_per_radian
+from vbn_common.geometry.rays import intersect_rays
+from visibility_builder.errors import VisibilityBuilderError
+
+__all__ = ['RefinementResult', 'RefinementSettings', 'refine_poses', 'tracks_from_pairs']
+
+#: Virtual sensors: one per this many degrees of azimuth.
+SECTOR_DEG = 45.0
+#: Optical (z forward, x right, y down) into the planar camera frame (x forward, y left).
+_OPTICAL_TO_PLANAR = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+@dataclass(frozen=True)
+class RefinementSettings:
+    """Settings of :func:`refine_poses`.
+
+    Attributes:
+        min_views: Fewest images of a track for it to enter.
+        min_angle_deg: Smallest angle between a track's rays (its triangulation).
+        huber_px: Huber threshold of the reprojection errors, pixels.
+        outlier_px: Observations further off after the first solve are removed.
+        noise_px: Standard deviation of a measured keypoint, pixels.
+        planar: Hold heights, rolls and pitches at zero (a robot on a floor).
+        max_iterations: Levenberg-Marquardt iterations per solve.
+    """
+
+    min_views: int = 3
+    min_angle_deg: float = 2.0
+    huber_px: float = 1.5
+    outlier_px: float = 3.0
+    noise_px: float = 0.7
+    planar: bool = True
+    max_iterations: int = 50
+
+
+@dataclass(frozen=True)
+class RefinementResult:
+    """Refined poses.
+
+    Attributes:
+        camera_poses: ``(n, 3)`` planar camera poses ``(x, y, heading)`` in ``map``.
+        tracks: Tracks used.
+        observations: Observations used in the final solve.
+        removed: Observations removed as outliers.
+        rms_px: RMS reprojection error of the final solve, pixels.
+        error_before: Total graph error at the start.
+        error_after: ... at the end.
+    """
+
+    camera_poses: np.ndarray
+    tracks: int
+    observations: int
+    removed: int
+    rms_px: float
+    error_before: float
+    error_after: float
+
+
+def tracks_from_pairs(n_features: list[int], pair_views: np.ndarray,
+                      pair_features: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Join pairwise matches into tracks (union-find); drop tracks seen twice in one image.
+
+    Args:
+        n_features: Features per image.
+        pair_views: ``(p, 2)`` the images of each pair.
+        pair_features: Per pair, ``(k, 2)`` matched feature indices.
+
+    Returns:
+        ``(track, image, feature)`` rows as ``(m, 3)`` int64, and the number of tracks.
+    """
+    offsets = np.concatenate([[0], np.cumsum(n_features)]).astype(np.int64)
+    total = int(offsets[-1])
+    parent = np.arange(total, dtype=np.int64)
+
+    def find(x: np.ndarray) -> np.ndarray:
+        root = x.copy()
+        while True:
+            nxt = parent[root]
+            if np.array_equal(nxt, root):
+                return root
+            root = nxt
+
+    edges = [np.stack([offsets[a] + f[:, 0], offsets[b] + f[:, 1]], axis=1)
+             for (a, b), f in zip(pair_views, pair_features, strict=True) if len(f)]
+    if not edges:
+        return np.zeros((0, 3), np.int64), 0
+    edges = np.concatenate(edges)
+    for _ in range(64):   # union by pointing roots at the smaller root, until stable
+        ra, rb = find(edges[:, 0]), find(edges[:, 1])
+        differ = ra != rb
+        if not differ.any():
+            break
+        lo, hi = np.minimum(ra, rb)[differ], np.maximum(ra, rb)[differ]
+        np.minimum.at(parent, hi, lo)
+    roots = find(np.arange(total))
+    used = np.zeros(total, bool)
+    used[edges.ravel()] = True
+    nodes = np.flatnonzero(used)
+    image = np.searchsorted(offsets, nodes, side='right') - 1
+    feature = nodes - offsets[image]
+    _, track = np.unique(roots[nodes], return_inverse=True)
+    # A track with two features of one image joined two different points: drop it.
+    key = track * (len(n_features) + 1) + image
+    _, counts = np.unique(key, return_counts=True)
+    doubled = np.unique(track[np.isin(key, np.unique(key)[counts > 1])])
+    keep = ~np.isin(track, doubled)
+    track, image, feature = track[keep], image[keep], feature[keep]
+    _, track = np.unique(track, return_inverse=True)
+    return np.stack([track, image, feature], axis=1), int(track.max() + 1) if len(track) else 0
+
+
+def _sensor_rotation(azimuth: float) -> np.ndarray:
+    """Rotation of a virtual optical sensor looking along ``azimuth`` into the body frame."""
+    c, s = math.cos(azimuth), math.sin(azimuth)
+    yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return yaw @ _OPTICAL_TO_PLANAR
+
+
+def refine_poses(camera_poses: np.ndarray, observations: np.ndarray, rays: np.ndarray,
+                 camera: CameraModel, odometry: tuple[np.ndarray, np.ndarray, np.ndarray],
+                 settings: RefinementSettings = RefinementSettings()) -> RefinementResult:
+    """Bundle-adjust planar camera poses and track points (module docstring).
+
+    Args:
+        camera_poses: ``(n, 3)`` initial ``(x, y, heading)`` of each camera.
+        observations: ``(m, 2)`` ``(track, image)`` of each observation.
+        rays: ``(m, 3)`` the observed unit rays in the camera's planar frame (``x``
+            forward, ``y`` left, ``z`` up).
+        camera: The camera (its angular resolution scales the pixels).
+        odometry: ``(pairs (k, 2), relative poses (k, 3) of camera j in camera i's
+            frame, standard deviations (k, 3) of x, y, yaw)``.
+        settings: See :class:`RefinementSettings`.
+
+    Returns:
+        The refined poses and the solve's figures.
+    """
+    import gtsam
+
+    poses = np.asarray(camera_poses, float)
+    n = len(poses)
+    observations = np.asarray(observations, np.int64).reshape(-1, 2)
+    rays = np.asarray(rays, float).reshape(-1, 3)
+    if len(observations) != len(rays):
+        raise VisibilityBuilderError('observations and rays differ in length')
+    if not np.all(np.isfinite(poses)):
+        raise VisibilityBuilderError('every camera needs an initial pose to be refined')
+    focal = pixels_per_radian(camera)
+    # Triangulate the tracks from the initial poses; keep the well-conditioned ones.
+    n_tracks = int(observations[:, 0].max()) + 1 if len(observations) else 0
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    img = observations[:, 1]
+    world = np.stack([c[img] * rays[:, 0] - s[img] * rays[:, 1],
+                      s[img] * rays[:, 0] + c[img] * rays[:, 1], rays[:, 2]], axis=1)
+    centres = np.concatenate([poses[img, :2], np.zeros((len(img), 1))], axis=1)
+    points = intersect_rays(world, centres, observations[:, 0], n_tracks)
+    views = np.bincount(observations[:, 0], minlength=n_tracks)
+    spread = np.zeros(n_tracks)
+    mean_dir = np.zeros((n_tracks, 3))
+    np.add.at(mean_dir, observations[:, 0], world)
+    mean_dir /= np.maximum(np.linalg.norm(mean_dir, axis=1, keepdims=True), 1e-12)
+    np.maximum.at(spread, observations[:, 0],
+                  np.arccos(np.clip(np.einsum('ij,ij->i', world,
+                                              mean_dir[observations[:, 0]]), -1, 1)))
+    good = (views >= settings.min_views) & np.isfinite(points).all(axis=1) & \
+        (2 * spread >= math.radians(settings.min_angle_deg))
+    # In front of each ray (positive depth), within a pixel budget of it: an observation
+    # that is not is left out (its track stays, with enough others).
+    to_point = points[observations[:, 0]] - centres
+    depth = np.einsum('ij,ij->i', to_point, world)
+    miss = np.linalg.norm(np.cross(to_point, world), axis=1) / np.maximum(depth, 1e-9)
+    fits = (depth > 0) & (miss * focal <= 4 * settings.outlier_px)
+    good &= np.bincount(observations[fits, 0], minlength=n_tracks) >= settings.min_views
+    use = good[observations[:, 0]] & fits
+    if not use.any():
+        raise VisibilityBuilderError('no track seen well enough to refine the poses')
+    X = gtsam.symbol_shorthand.X
+    L = gtsam.symbol_shorthand.L
+    calibration = gtsam.Cal3_S2(focal, focal, 0.0, 0.0, 0.0)
+    noise = gtsam.noiseModel.Robust.Create(
+        gtsam.noiseModel.mEstimator.Huber.Create(settings.huber_px / settings.noise_px),
+        gtsam.noiseModel.Isotropic.Sigma(2, settings.noise_px))
+    sensors = [gtsam.Pose3(gtsam.Rot3(_sensor_rotation(math.radians(k * SECTOR_DEG))),
+                           np.zeros(3)) for k in range(int(round(360 / SECTOR_DEG)))]
+
+    def pose3(p: np.ndarray) -> object:
+        return gtsam.Pose3(gtsam.Rot3.Rz(float(p[2])), np.array([p[0], p[1], 0.0]))
+
+    def build(active: np.ndarray) -> tuple[object, object]:
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        for i in range(n):
+            values.insert(X(i), pose3(poses[i]))
+        for t in np.flatnonzero(good):
+            values.insert(L(int(t)), points[t])
+        for k in np.flatnonzero(active):
+            ray = rays[k]
+            azimuth = math.atan2(ray[1], ray[0])
+            sector = int(round(azimuth / math.radians(SECTOR_DEG))) % len(sensors)
+            sensor_r = _sensor_rotation(math.radians(sector * SECTOR_DEG))
+            local = sensor_r.T @ ray
+            if local[2] <= 0.2:
+                continue
+            uv = focal * local[:2] / local[2]
+            graph.add(gtsam.GenericProjectionFactorCal3_S2(
+                uv, noise, X(int(observations[k, 1])), L(int(observations[k, 0])),
+                calibration, sensors[sector]))
+        pairs, relative, sigmas = odometry
+        for (a, b), rel, sig in zip(pairs, relative, sigmas, strict=True):
+            model = gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([1e-3, 1e-3, sig[2], sig[0], sig[1], 1e-3]))
+            graph.add(gtsam.BetweenFactorPose3(X(int(a)), X(int(b)), pose3(rel), model))
+        if settings.planar:
+            flat = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-5, 1e-5, 1e3, 1e3, 1e3, 1e-5]))
+            for i in range(n):
+                graph.add(gtsam.PriorFactorPose3(X(i), pose3(poses[i]), flat))
+        graph.add(gtsam.PriorFactorPose3(X(0), pose3(poses[0]),
+                                         gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        return graph, values
+
+    def solve(active: np.ndarray) -> tuple[object, object, float, float]:
+        graph, values = build(active)
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(settings.max_iterations)
+        before = graph.error(values)
+        result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+        return graph, result, before, graph.error(result)
+
+    _, result, before, _ = solve(use)
+    # Remove the observations still far off, solve again from the start.
+    refined_points = np.array([result.atPoint3(L(int(t))) if good[t] else np.full(3, np.nan)
+                               for t in range(n_tracks)])
+    errors = _pixel_errors(result, observations, rays, refined_points, focal, X)
+    keep = use & (errors <= settings.outlier_px)
+    graph, result, _, after = solve(keep)
+    refined_points = np.array([result.atPoint3(L(int(t))) if good[t] else np.full(3, np.nan)
+                               for t in range(n_tracks)])
+    errors = _pixel_errors(result, observations, rays, refined_points, focal, X)
+    rms = float(np.sqrt(np.mean(errors[keep] ** 2))) if keep.any() else math.nan
+    out = np.zeros((n, 3))
+    for i in range(n):
+        p = result.atPose3(X(i))
+        out[i] = [p.x(), p.y(), p.rotation().yaw()]
+    return RefinementResult(out, int(good.sum()), int(keep.sum()), int((use & ~keep).sum()),
+                            rms, float(before), float(after))
+
+
+def _pixel_errors(result: object, observations: np.ndarray, rays: np.ndarray,
+                  points: np.ndarray, focal: float, key: object) -> np.ndarray:
+    """Angle between each observed ray and its refined point, in pixels."""
+    n = int(observations[:, 1].max()) + 1
+    poses = np.zeros((n, 3))
+    for i in range(n):
+        p = result.atPose3(key(i))
+        poses[i] = [p.x(), p.y(), p.rotation().yaw()]
+    img = observations[:, 1]
+    d = points[observations[:, 0]] - np.concatenate([poses[img, :2],
+                                                     np.zeros((len(img), 1))], axis=1)
+    c, s = np.cos(poses[img, 2]), np.sin(poses[img, 2])
+    local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+    local /= np.maximum(np.linalg.norm(local, axis=1, keepdims=True), 1e-12)
+    cos = np.einsum('ij,ij->i', local, rays)
+    out = np.arccos(np.clip(cos, -1.0, 1.0)) * focal
+    return np.where(np.isfinite(out), out, np.inf)
