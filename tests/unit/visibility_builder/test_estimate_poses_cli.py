@@ -81,3 +81,30 @@ def test_bad_input_is_one_line_and_writes_nothing(driven, tmp_path, capsys) -> N
         assert len(err) == 1 and message in err[0] and 'Traceback' not in err[0]
     assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()
     assert not np.any([p.name.startswith('.') for p in tmp_path.iterdir()])
+
+
+def test_build_estimates_the_poses_of_an_odometry_only_bag(driven, tmp_path, capsys) -> None:
+    """A robot's own bag: images, camera info, odometry, no ground truth, no map frame."""
+    from vbn_common.bags import BagWriter
+
+    stripped = tmp_path / 'robot'
+    with open_bag(driven) as bag, BagWriter(stripped) as writer:
+        keep = {n: writer.add_topic(n, i.msgtype, i.qos_profiles or None)
+                for n, i in bag.topics.items() if n != '/ground_truth/pose'}
+        for topic, _, stamp, raw in bag.messages(topics=list(keep)):
+            writer.write_raw(keep[topic], stamp, raw)
+    db = tmp_path / 'robot.db'
+    assert vbn_main(['build', str(stripped), '--db', str(db), '--quiet']) == 0
+    assert db.is_file()
+    # no odometry either: one line, nothing written
+    bare = tmp_path / 'bare'
+    with open_bag(driven) as bag, BagWriter(bare) as writer:
+        keep = {n: writer.add_topic(n, i.msgtype, i.qos_profiles or None)
+                for n, i in bag.topics.items() if n in ('/camera/image_raw/compressed',
+                                                         '/camera/camera_info')}
+        for topic, _, stamp, raw in bag.messages(topics=list(keep)):
+            writer.write_raw(keep[topic], stamp, raw)
+    capsys.readouterr()
+    assert vbn_main(['build', str(bare), '--db', str(tmp_path / 'bare.db'), '--quiet']) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert 'nor odometry' in err[-1] and not (tmp_path / 'bare.db').exists()

@@ -50,6 +50,7 @@ from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose, serv
 from landmark_db.errors import LandmarkDbError
 from landmark_db.workers import available_cores
 from landmark_db.world import WorldInstance
+from vbn_common.errors import VbnCommonError
 from vbn_common.exploration import Exploration, ReadConfig, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
 from vbn_common.geometry.camera import camera_from_info
@@ -355,11 +356,37 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
     report = BuildReport()
     stages = _Stages(report, on_stage)
     stages.begin('read', str(bag))
-    exploration = read_exploration(bag, config.read)
+    try:
+        exploration = read_exploration(bag, config.read)
+    except VbnCommonError as error:
+        if config.read.pose_source != 'auto' or 'no pose source' not in str(error):
+            raise
+        exploration = _estimate_from_odometry(bag, config, error)
     stages.end(frames=len(exploration.frames), pose_source=exploration.pose_source,
                skipped=dict(exploration.skipped))
     return build_from_exploration(exploration, config, db_path, stages=stages,
                                   on_image=on_image, source=source, check_stop=check_stop)
+
+
+def _estimate_from_odometry(bag: str | os.PathLike[str], config: BuildConfig,
+                            missing: VbnCommonError) -> Exploration:
+    """Pose the images from themselves and the odometry (``vbn estimate-poses``, 6.1)."""
+    from visibility_builder.estimation.pipeline import (
+        EstimationSettings,
+        estimate_poses,
+        estimated_exploration,
+    )
+
+    try:
+        odometry = read_exploration(bag, replace(config.read, pose_source='tf',
+                                                 map_frame='odom'))
+    except VbnCommonError:
+        raise VisibilityBuilderError(f'{missing}; nor odometry (odom -> base_link on /tf) to '
+                                     'estimate them from') from None
+    _LOG.warning('%s has no poses of its images: estimating them from the images and the '
+                 'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
+    result = estimate_poses(odometry, EstimationSettings(workers=config.workers))
+    return estimated_exploration(odometry, result)
 
 
 def build_from_exploration(exploration: Exploration, config: BuildConfig = BuildConfig(),

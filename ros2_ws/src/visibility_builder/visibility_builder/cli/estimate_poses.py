@@ -11,7 +11,10 @@ Reads the exploration's images, camera info and odometry (``odom -> base_link`` 
 (:mod:`visibility_builder.estimation.pipeline`) and writes a copy of the bag with
 ``/estimated/pose`` added. Prints the pairs tried, kept and refused (with why), the
 time of each step and, when the bag has ``/ground_truth/pose``, the accuracy of the
-odometry, of the thesis's own result and of the result, after an SE(2) alignment.
+odometry, of the thesis's own result (directions alone, scaled by the odometry's path),
+of the joint solve with the odometry, of the unrefined result and of the result after the
+bundle adjustment (:mod:`visibility_builder.estimation.refinement`), each after an SE(2)
+alignment.
 """
 from __future__ import annotations
 
@@ -110,15 +113,20 @@ def run(args: argparse.Namespace) -> int:
               f'({result.components[:5]}...): the largest is estimated, the others rest on '
               'the odometry')
     print('  times: ' + ', '.join(f'{k} {v:.1f} s' for k, v in result.times.items()))
+    if result.refinement is not None:
+        r = result.refinement
+        print(f'  bundle adjustment: {r.tracks} tracks, {r.observations} observations '
+              f'({r.removed} removed as outliers), RMS {r.rms_px:.2f} px')
     figures: dict[str, Any] = {'images': n, 'estimated': estimated, 'written': written,
                                'pairs': len(result.pairs), 'tried': result.tried,
                                'refused': result.refused, 'times': result.times,
                                'components': result.components[:10]}
     if truth is not None:
         for name, p in (('odometry', result.odometry_poses), ('thesis', result.thesis_poses),
-                        ('joint', result.joint_poses), ('result', result.base_poses)):
+                        ('joint', result.joint_poses), ('unrefined', result.unrefined_poses),
+                        ('result', result.base_poses)):
             errors = pose_errors(p, truth)
-            print(f'  {name:<9} against /ground_truth/pose (SE(2) aligned): {errors.line()}')
+            print(f'  {name:<10} against /ground_truth/pose (SE(2) aligned): {errors.line()}')
             figures[name] = errors.__dict__
     print(f'wrote {out}: {written} /estimated/pose of {n} images (frame map = '
           f'{"the truth, aligned" if args.frame == "truth" else "odometry at the first image"})')

@@ -35,7 +35,7 @@ the pairs with the reason each was dropped, and per-step times.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import logging
 import math
 import time
@@ -63,7 +63,8 @@ from visibility_builder.estimation.rotations import (
 )
 from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
 
-__all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_poses', 'matrix_to_quat']
+__all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_poses', 'estimated_exploration',
+           'matrix_to_quat']
 
 _LOG = logging.getLogger(__name__)
 
@@ -332,6 +333,31 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     return PoseEstimation(base, thesis, joint, unrefined, odom_base.copy(), station, pairs,
                           fit['kept_rotation'], fit['kept_direction'], tried, refused, times,
                           fit['components'], refined)
+
+
+def estimated_exploration(exploration: Exploration, result: PoseEstimation) -> Exploration:
+    """Return ``exploration`` with each frame posed by ``result`` (unposed frames dropped).
+
+    ``exploration`` is the one :func:`estimate_poses` read (odometry poses); its camera
+    mount carries the estimated base poses to camera poses.
+    """
+    odom_base = exploration.base_poses()
+    odom_cam = exploration.camera_poses()
+    mount = compose_poses(invert_pose(odom_base[0]), odom_cam[0])
+    frames = []
+    for frame, pose in zip(exploration.frames, result.base_poses, strict=True):
+        if not np.all(np.isfinite(pose)):
+            continue
+        camera = compose_poses(pose, mount)
+        frames.append(replace(frame, base_pose=tuple(float(v) for v in pose),
+                              camera_pose=tuple(float(v) for v in camera)))
+    if len(frames) < 2:
+        raise VisibilityBuilderError('fewer than two images could be posed from the images '
+                                     'and the odometry')
+    skipped = dict(exploration.skipped)
+    skipped['no_pose'] = skipped.get('no_pose', 0) + len(exploration.frames) - len(frames)
+    return replace(exploration, frames=tuple(frames), pose_source='estimated',
+                   skipped=skipped)
 
 
 def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
