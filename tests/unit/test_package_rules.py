@@ -42,6 +42,7 @@ KEYS = {
     'lz4': None, 'zstandard': None,   # rosbags' own dependencies (python3-rosbags-pip)
     'evo': None,            # the localizer's benchmark: evo_ape beside our accuracy
     'pycolmap': None,       # the benchmark's structure-based peer (requirements.txt pins it)
+    'gtsam': 'gtsam',       # the bundle adjustment of vbn estimate-poses
     'backports': None,      # backports.zstd (the zstd of Python 3.14 before 3.14)
     'compression': None,    # Python 3.14's standard library
 }

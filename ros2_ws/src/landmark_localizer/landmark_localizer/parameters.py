@@ -18,7 +18,6 @@ Every parameter either takes effect when set at run time or is read-only:
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
-import re
 from typing import Any
 
 import numpy as np
@@ -26,7 +25,7 @@ import numpy as np
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from vbn_common.names import BASE_FRAME, MAP_FRAME, ODOM_FRAME
-from vbn_common.parameters import unknown_parameters
+from vbn_common.parameters import attribute_docs, unknown_parameters
 
 __all__ = ['READ_ONLY', 'NodeSettings', 'ParameterSpec', 'config_descriptions',
            'parameter_specs', 'settings_from_values', 'unknown_parameters']
@@ -93,20 +92,8 @@ class NodeSettings:
 
 def config_descriptions(cls: type = LocalizerConfig) -> dict[str, str]:
     """Return each field's description from a dataclass's ``Attributes:`` docstring."""
-    doc = cls.__doc__ or ''
-    section = doc.split('Attributes:', 1)[-1]
-    out: dict[str, str] = {}
-    name = None
-    for line in section.splitlines():
-        match = re.match(r'^ {8}(\w+): (.*)$', line)
-        if match:
-            name = match.group(1)
-            out[name] = match.group(2).strip()
-        elif name and line.startswith(' ' * 12):
-            out[name] += ' ' + line.strip()
-        elif line.strip():
-            name = None
-    return {f.name: out.get(f.name, '') for f in fields(cls)}
+    docs = attribute_docs(cls)
+    return {f.name: docs.get(f.name, '') for f in fields(cls)}
 
 
 def parameter_specs() -> list[ParameterSpec]:

@@ -22,16 +22,15 @@ Poses, planar ``(x, y, yaw)`` in ``map``:
   ``odom``), every dynamic link taken at its nearest stamp within the tolerance
   (no interpolation: an exploring robot stands still while it takes images).
 
-``auto`` (the default) uses the ground truth when the bag has it, else ``/tf``.
-The camera's pose is the base pose composed with ``base_link -> camera`` (from
-``/tf_static``, or ``/tf``), in 3-D, then reduced to the plane: the camera's
-position is the origin of its frame projected on the floor; its *heading* is the
-azimuth in ``map`` of its forward axis, which is the optical ``z`` axis of the
-``camera`` frame (REP 103 optical convention: ``z`` forward, ``x`` right,
-``y`` down; ``ReadConfig.camera_forward_axis = 'x'`` for a body-convention camera
-frame). For the samples' camera (optical frame rotated from ``base_link`` by the
-usual ``(-0.5, 0.5, -0.5, 0.5)``) the heading equals the base yaw, and for a
-panorama it is the azimuth of the panorama's centre column.
+``estimated``: ``/estimated/pose`` (of ``vbn estimate-poses``), read as the ground
+truth is. ``auto`` (the default) takes the first of the three the bag has. The camera's
+pose is the base pose composed with ``base_link -> camera`` (``/tf_static`` or ``/tf``)
+in 3-D, then reduced to the plane: the camera's position is its frame's origin on the
+floor; its *heading* the azimuth in ``map`` of its forward axis, the optical ``z`` axis
+of ``camera`` (REP 103 optical convention: ``z`` forward, ``x`` right, ``y`` down;
+``ReadConfig.camera_forward_axis = 'x'`` for a body-convention camera frame). For the
+samples' camera (optical frame rotated from ``base_link`` by ``(-0.5, 0.5, -0.5,
+0.5)``) the heading is the base yaw; for a panorama, the azimuth of its centre column.
 
 Stamps are header stamps (the bag time when a header stamp is zero).
 
@@ -95,8 +94,7 @@ __all__ = [
 _LOG = logging.getLogger(__name__)
 
 #: Image topics tried in this order when ``ReadConfig.image_topic`` is ``None``.
-#: Pose sources read from a pose topic (the others from /tf).
-_POSE_TOPIC_SOURCES = ('ground_truth', 'estimated')
+_POSE_TOPIC_SOURCES = ('ground_truth', 'estimated')   # read from a pose topic
 POSE_SOURCES = ('auto', 'ground_truth', 'estimated', 'tf')
 #: Keys of :attr:`Exploration.skipped`.
 SKIP_REASONS = ('bad_image', 'no_pose', 'invalid_pose')
@@ -118,10 +116,8 @@ class ReadConfig:
             has images there, else ``/camera/image_raw/compressed``.
         camera_info_topic: the ``sensor_msgs/CameraInfo`` topic.
         pose_topic: the ground-truth pose topic (pose of ``base_frame`` in ``map_frame``).
-        pose_source: ``'auto'`` (ground truth if the bag has it, else ``/estimated/pose``,
-            else ``/tf``),
-            ``'ground_truth'``, ``'estimated'`` (``/estimated/pose``, written by ``vbn
-            estimate-poses``) or ``'tf'``.
+        pose_source: ``'auto'`` (the first of these the bag has), ``'ground_truth'``,
+            ``'estimated'`` (``/estimated/pose`` of ``vbn estimate-poses``) or ``'tf'``.
         pose_tolerance_s: largest time between an image and the pose (or each
             ``/tf`` link) it gets, seconds.
         map_frame: the fixed frame.
@@ -294,8 +290,8 @@ def read_exploration(bag_path: str | os.PathLike[str],
         The frames, calibration and pose source; what was skipped and why.
 
     Raises:
-        VbnCommonError: the bag cannot be read, or it has no messages, no
-            images, no camera info, no pose source or no usable frame.
+        VbnCommonError: an unreadable bag, no messages, images, camera info, poses or
+            usable frame.
 
     Example:
         >>> exploration = read_exploration('bags/room_exploration')  # doctest: +SKIP
@@ -360,8 +356,7 @@ def _pose_source(path: Path, counts: dict[str, int], config: ReadConfig) -> str:
             f'bag {path} has no ground truth: no messages on {config.pose_topic}')
     has_estimate = bool(counts.get(ESTIMATED_POSE))
     if config.pose_source == 'estimated' and not has_estimate:
-        raise VbnCommonError(f'bag {path} has no estimated poses: no messages on '
-                             f'{ESTIMATED_POSE} (vbn estimate-poses writes them)')
+        raise VbnCommonError(f'bag {path} has no {ESTIMATED_POSE} (vbn estimate-poses)')
     if config.pose_source == 'tf' and not has_tf:
         raise VbnCommonError(f'bag {path} has no pose source: no messages on {_TF}')
     if config.pose_source != 'auto':

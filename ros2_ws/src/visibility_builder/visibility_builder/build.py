@@ -55,6 +55,7 @@ from vbn_common.exploration import Exploration, ReadConfig, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
 from vbn_common.geometry.camera import camera_from_info
 from vbn_common.geometry.frames import compose_poses, invert_pose
+from vbn_common.parameters import attribute_docs
 from visibility_builder.classes import ClassConfig, correspondence_classes
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.filters import FilterConfig, retain_good_features
@@ -192,39 +193,15 @@ def config_from_flat(values: dict[str, Any], base: BuildConfig | None = None) ->
         raise VisibilityBuilderError(f'bad build setting: {error}') from None
 
 
-def _attribute_docs(cls: type) -> dict[str, str]:
-    """``{attribute: description}`` from the ``Attributes:`` block of a class docstring."""
-    docs: dict[str, str] = {}
-    lines = (cls.__doc__ or '').splitlines()
-    inside, name = False, ''
-    for line in lines:
-        stripped = line.strip()
-        if stripped == 'Attributes:':
-            inside = True
-            continue
-        if not inside:
-            continue
-        if not stripped:
-            break
-        head, sep, text = stripped.partition(':')
-        if sep and head.isidentifier() and line.startswith(' ' * 8) \
-                and not line.startswith(' ' * 12):
-            name = head
-            docs[name] = text.strip()
-        elif name:
-            docs[name] += ' ' + stripped
-    return docs
-
-
 def setting_descriptions(config: BuildConfig | None = None) -> dict[str, str]:
     """``{'section.name': description}`` of every setting, from the config docstrings."""
     config = config or BuildConfig()
     out: dict[str, str] = {}
     for section in _SECTIONS:
-        docs = _attribute_docs(type(getattr(config, section)))
+        docs = attribute_docs(type(getattr(config, section)))
         for key in asdict(getattr(config, section)):
             out[f'{section}.{key}'] = docs.get(key, '')
-    top = _attribute_docs(BuildConfig)
+    top = attribute_docs(BuildConfig)
     out['descriptors_per_class'] = top.get('descriptors_per_class', '')
     out['workers'] = top.get('workers', '')
     return out
@@ -361,32 +338,13 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
     except VbnCommonError as error:
         if config.read.pose_source != 'auto' or 'no pose source' not in str(error):
             raise
-        exploration = _estimate_from_odometry(bag, config, error)
+        from visibility_builder.estimation.pipeline import estimate_from_odometry
+
+        exploration = estimate_from_odometry(bag, config.read, config.workers, error)
     stages.end(frames=len(exploration.frames), pose_source=exploration.pose_source,
                skipped=dict(exploration.skipped))
     return build_from_exploration(exploration, config, db_path, stages=stages,
                                   on_image=on_image, source=source, check_stop=check_stop)
-
-
-def _estimate_from_odometry(bag: str | os.PathLike[str], config: BuildConfig,
-                            missing: VbnCommonError) -> Exploration:
-    """Pose the images from themselves and the odometry (``vbn estimate-poses``, 6.1)."""
-    from visibility_builder.estimation.pipeline import (
-        EstimationSettings,
-        estimate_poses,
-        estimated_exploration,
-    )
-
-    try:
-        odometry = read_exploration(bag, replace(config.read, pose_source='tf',
-                                                 map_frame='odom'))
-    except VbnCommonError:
-        raise VisibilityBuilderError(f'{missing}; nor odometry (odom -> base_link on /tf) to '
-                                     'estimate them from') from None
-    _LOG.warning('%s has no poses of its images: estimating them from the images and the '
-                 'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
-    result = estimate_poses(odometry, EstimationSettings(workers=config.workers))
-    return estimated_exploration(odometry, result)
 
 
 def build_from_exploration(exploration: Exploration, config: BuildConfig = BuildConfig(),

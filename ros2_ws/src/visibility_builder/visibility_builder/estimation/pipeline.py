@@ -38,11 +38,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 import logging
 import math
+import os
 import time
 
 import numpy as np
 
-from vbn_common.exploration import Exploration
+from vbn_common.errors import VbnCommonError
+from vbn_common.exploration import Exploration, ReadConfig, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
@@ -63,8 +65,8 @@ from visibility_builder.estimation.rotations import (
 )
 from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
 
-__all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_poses', 'estimated_exploration',
-           'matrix_to_quat']
+__all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_from_odometry', 'estimate_poses',
+           'estimated_exploration', 'matrix_to_quat']
 
 _LOG = logging.getLogger(__name__)
 
@@ -358,6 +360,24 @@ def estimated_exploration(exploration: Exploration, result: PoseEstimation) -> E
     skipped['no_pose'] = skipped.get('no_pose', 0) + len(exploration.frames) - len(frames)
     return replace(exploration, frames=tuple(frames), pose_source='estimated',
                    skipped=skipped)
+
+
+def estimate_from_odometry(bag: str | os.PathLike[str], read: ReadConfig,
+                           workers: int | None, missing: Exception) -> Exploration:
+    """Read ``bag``'s images and odometry and pose them (``vbn build`` on a robot's bag).
+
+    ``missing`` is why the bag's own poses could not be read; without odometry either,
+    the error says both.
+    """
+    try:
+        odometry = read_exploration(bag, replace(read, pose_source='tf', map_frame='odom'))
+    except VbnCommonError:
+        raise VisibilityBuilderError(f'{missing}; nor odometry (odom -> base_link on /tf) to '
+                                     'estimate them from') from None
+    _LOG.warning('%s has no poses of its images: estimating them from the images and the '
+                 'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
+    result = estimate_poses(odometry, EstimationSettings(workers=workers))
+    return estimated_exploration(odometry, result)
 
 
 def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
