@@ -35,7 +35,15 @@ from vbn_common.geometry.motion import TwoViewConfig
 from vbn_common.geometry.two_view import relative_motion
 from visibility_builder.pair_matching import match_pose_pair
 
-__all__ = ['PairMotion', 'PairSettings', 'measure_pair', 'rotation_only']
+__all__ = ['DIRECTION_STD_FLOOR', 'ROTATION_STD_FLOOR', 'PairMotion', 'PairSettings',
+           'measure_pair', 'rotation_only']
+
+
+#: Least standard deviations a measurement claims, radians: a solver's covariance from a
+#: few hundred inliers can claim microradians, and one wrong pair so weighted outweighs
+#: every other (weights over 1e8 beside 1e-1 on the pinhole room).
+ROTATION_STD_FLOOR = 3e-4
+DIRECTION_STD_FLOOR = 1e-3
 
 
 @dataclass(frozen=True)
@@ -142,7 +150,8 @@ def measure_pair(i: int, j: int, a: ImageFeatures, b: ImageFeatures, camera: Cam
     direction[:len(motion.direction)] = motion.direction
     direction /= np.linalg.norm(direction)
     return PairMotion(i, j, np.asarray(motion.rotation, float), direction,
-                      factor * max(rot_std, 1e-5), factor * max(dir_std, 1e-5), len(pairs),
+                      factor * max(rot_std, ROTATION_STD_FLOOR),
+                      factor * max(dir_std, DIRECTION_STD_FLOOR), len(pairs),
                       inliers, float(motion.residual), motion.method,
                       pairs[np.asarray(motion.inliers, bool)]), ''
 
