@@ -11,7 +11,7 @@ from landmark_db.scenes import resolve_scene
 from vbn_common.geometry.frames import compose_poses, wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.synthesis.bags import BagSpec, write_bag
-from visibility_builder.synthesis.exploration_drive import driven_exploration
+from visibility_builder.synthesis.exploration_drive import driven_exploration, visiting_order
 from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
 from visibility_builder.synthesis.trajectory import RunParameters
@@ -79,6 +79,21 @@ def test_legs_go_round_an_obstacle() -> None:
     assert driven.image_poses[-1, :2] == pytest.approx([3.0, 0.5])
 
 
+def test_visiting_order_goes_to_the_nearest_reachable_position() -> None:
+    scene = _square_with_wall()
+    grid = np.array([[x, y] for y in (0.5, 1.5, 2.5, 3.5) for x in (0.5, 1.5, 2.5, 3.5)])
+    grid = grid[scene.free_space(grid)]
+    order = visiting_order(scene, grid, 0.2)
+    assert sorted(order.tolist()) == list(range(len(grid)))
+    assert order[0] == 0
+    steps = np.linalg.norm(np.diff(grid[order], axis=0), axis=1)
+    assert np.count_nonzero(steps > 1.0 + 1e-9) <= 1 and steps.max() <= 2.0 + 1e-9
+    # the left room (x < 2) is done before the robot crosses over the wall's end
+    left = grid[order, 0] < 2.0
+    switches = np.count_nonzero(np.diff(left.astype(int)))
+    assert switches == 1
+
+
 def test_noise_free_odometry_reproduces_the_ground_truth(room) -> None:
     positions = exploration_poses(room, 0.75)
     driven = driven_exploration(room, positions, 1, RunParameters(), 0.2)
@@ -99,7 +114,9 @@ def test_driven_exploration_bag(tmp_path, room) -> None:
     assert summary.images == n
     assert summary.counts['/odom'] == summary.counts['/tf'] > 20 * n
     run = read_run_bag(tmp_path / 'driven')
-    assert run.truth_poses[:, :2] == pytest.approx(exploration_poses(room, 1.0))
+    grid = exploration_poses(room, 1.0)
+    order = visiting_order(room, grid, 0.2)
+    assert run.truth_poses[:, :2] == pytest.approx(grid[order])
     assert set(np.diff(run.odom_stamps_ns)) == {20_000_000}
     assert np.isin(run.stamps_ns, run.odom_stamps_ns).all()   # images on odometry ticks
     # odometry starts where the robot starts and drifts from the truth with the path

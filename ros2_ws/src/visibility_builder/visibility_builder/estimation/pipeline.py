@@ -272,15 +272,17 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     tried: dict[str, int] = {}
 
     def measure(candidates: list[tuple[int, int]], name: str, reference: np.ndarray,
-                turn_std: np.ndarray) -> None:
+                turn_std: np.ndarray, path: np.ndarray) -> None:
         t0 = time.perf_counter()
         todo = [c for c in candidates if c not in measured and (c[1], c[0]) not in measured]
         tried[name] = len(todo)
         for k, (i, j) in enumerate(todo):
             motion, why = measure_pair(i, j, features[i], features[j], camera, settings.pairs)
             if motion is not None:
+                driven = abs(float(path[j] - path[i]))
                 why = _disagrees(motion, compose_poses(invert_pose(reference[i]), reference[j]),
-                                 abs(float(turn_std[j] - turn_std[i])))
+                                 abs(float(turn_std[j] - turn_std[i])),
+                                 settings.odometry_std_per_m * driven)
                 motion = None if why else motion
             if motion is None:
                 key = why.split(':')[0] if ':' in why else why.split(' ', 1)[-1]
@@ -306,7 +308,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     moved = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(odom_base[:, :2], axis=0),
                                                             axis=1))])
     odo_turn_std = settings.odometry_turn_std * turned + settings.odometry_yaw_drift_std * moved
-    measure(first, 'first', odom_cam, odo_turn_std)
+    measure(first, 'first', odom_cam, odo_turn_std, moved)
     if not measured:
         raise VisibilityBuilderError('no two images overlap: no pair of images has '
                                      f'{settings.pairs.min_matches} matches that one motion '
@@ -329,7 +331,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                     math.radians(0.5 * field_deg):
                 continue
             second.append((i, j))
-    measure(second, 'second', cam, np.zeros(n))
+    measure(second, 'second', cam, np.zeros(n), np.zeros(n))
     t = time.perf_counter()
     fit = _fit(n, station, odom_base, mount, measured, settings)
     times['fit (final)'] = time.perf_counter() - t
@@ -360,10 +362,13 @@ GATE_TURN_DEG = 3.0
 GATE_DIRECTION_DEG = 30.0
 
 
-def _disagrees(motion: PairMotion, predicted: np.ndarray, turn_std: float) -> str:
+def _disagrees(motion: PairMotion, predicted: np.ndarray, turn_std: float,
+               position_std: float) -> str:
     """Return why a motion contradicts the predicted relative pose, or ''.
 
-    The prediction is the odometry's (near in time) or the first estimate's. A planar
+    The prediction is the odometry's (near in time) or the first estimate's, with the
+    standard deviations of its turn and of its displacement (metres): the gates widen
+    with them (a detour round a wall leaves the odometry's relative pose loose). A planar
     scene (one wall filling a pinhole view) admits a second motion that fits the matches
     as well; the prediction tells them apart.
     """
@@ -371,10 +376,11 @@ def _disagrees(motion: PairMotion, predicted: np.ndarray, turn_std: float) -> st
     if abs(float(wrap_angle(theta - predicted[2]))) > max(math.radians(GATE_TURN_DEG),
                                                           3.0 * turn_std):
         return 'rotation against the prediction'
-    if motion.has_direction and float(np.hypot(predicted[0], predicted[1])) >= 0.05:
+    length = float(np.hypot(predicted[0], predicted[1]))
+    if motion.has_direction and length >= 0.05 and 3.0 * position_std < length:
         bearing = math.atan2(motion.direction[1], motion.direction[0])
-        if abs(float(wrap_angle(bearing - math.atan2(predicted[1], predicted[0])))) > \
-                math.radians(GATE_DIRECTION_DEG):
+        gate = max(math.radians(GATE_DIRECTION_DEG), math.asin(3.0 * position_std / length))
+        if abs(float(wrap_angle(bearing - math.atan2(predicted[1], predicted[0])))) > gate:
             return 'direction against the prediction'
     return ''
 

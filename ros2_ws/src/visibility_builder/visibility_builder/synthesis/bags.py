@@ -61,6 +61,7 @@ from visibility_builder.synthesis import messages
 from visibility_builder.synthesis.exploration_drive import (
     DrivenExploration,
     driven_exploration,
+    visiting_order,
 )
 from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
@@ -305,9 +306,10 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     # Plan before opening the bag: bad input must leave nothing behind.
     driven = None
     if spec.kind == 'exploration' and spec.odometry:
-        driven = driven_exploration(
-            scene, exploration_poses(scene, spec.spacing, spec.clearance),
-            spec.exploration_headings(), spec.run, spec.clearance)
+        grid = exploration_poses(scene, spec.spacing, spec.clearance)
+        grid = grid[visiting_order(scene, grid, spec.clearance)]
+        driven = driven_exploration(scene, grid, spec.exploration_headings(), spec.run,
+                                    spec.clearance)
         frames, trajectory = [], driven.trajectory
     elif spec.kind == 'exploration':
         frames = list(_camera_frames(spec, scene))

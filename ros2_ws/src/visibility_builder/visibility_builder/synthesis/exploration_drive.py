@@ -8,7 +8,8 @@ is taken at whatever heading the robot arrived with) and takes one image at each
 standing. Its wheels measure all of it, so the wheel odometry
 (:func:`~.odometry.simulate_odometry`) drifts with the whole path, turns included.
 
-Motions are a turn on the spot or a straight drive, each with a trapezoidal speed
+The positions are visited nearest first (:func:`visiting_order`), as a robot explores
+room by room. Motions are a turn on the spot or a straight drive, each with a trapezoidal speed
 profile (``max_turn_rate`` and :data:`TURN_ACCEL`; ``max_speed`` and ``max_accel`` of
 :class:`~.trajectory.RunParameters`), stretched to a whole number of time steps so that
 each sample's velocity is exactly the motion to the next sample (noise-free odometry
@@ -30,7 +31,8 @@ from vbn_common.geometry.frames import wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.synthesis.trajectory import RunParameters, Trajectory, _lattice_graph
 
-__all__ = ['DWELL_S', 'TURN_ACCEL', 'DrivenExploration', 'driven_exploration']
+__all__ = ['DWELL_S', 'TURN_ACCEL', 'DrivenExploration', 'driven_exploration',
+           'visiting_order']
 
 #: Angular acceleration of a turn on the spot, rad/s^2.
 TURN_ACCEL = 1.5
@@ -175,6 +177,33 @@ class _Router:
             out.append(np.asarray(polyline[nxt], float))
             here = nxt
         return out
+
+
+def visiting_order(scene: Scene, positions: np.ndarray, clearance: float) -> np.ndarray:
+    """Order the positions as an exploring robot would: the nearest one it can drive to.
+
+    From the first position, each next one is the nearest unvisited position reachable
+    by a clear straight leg, or, when none is, the nearest of all (the leg then goes round
+    by the lattice). The grid's boustrophedon order crosses walls between rooms; on the
+    floor scene at 0.75 m it made 2,385 s of driving and odometry 9 m off at the median.
+    """
+    positions = np.asarray(positions, float).reshape(-1, 2)
+    left = np.ones(len(positions), bool)
+    order = [0]
+    left[0] = False
+    while left.any():
+        here = positions[order[-1]]
+        candidates = np.flatnonzero(left)
+        by_distance = candidates[np.argsort(np.linalg.norm(positions[candidates] - here,
+                                                           axis=1), kind='stable')]
+        chosen = by_distance[0]
+        for k in by_distance[:8]:
+            if _clear(scene, here, positions[k], clearance):
+                chosen = k
+                break
+        order.append(int(chosen))
+        left[chosen] = False
+    return np.array(order, np.int64)
 
 
 def driven_exploration(scene: Scene, positions: np.ndarray, headings: int,
