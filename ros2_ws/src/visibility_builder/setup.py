@@ -29,6 +29,7 @@ setup(
             'build = visibility_builder.cli.build:register',
             'bench-build = visibility_builder.cli.bench_build:register',
             'estimate-poses = visibility_builder.cli.estimate_poses:register',
+            'bench-estimate = visibility_builder.cli.bench_estimate:register',
         ],
     },
 )

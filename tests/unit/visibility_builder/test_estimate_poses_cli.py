@@ -108,3 +108,17 @@ def test_build_estimates_the_poses_of_an_odometry_only_bag(driven, tmp_path, cap
     assert vbn_main(['build', str(bare), '--db', str(tmp_path / 'bare.db'), '--quiet']) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert 'nor odometry' in err[-1] and not (tmp_path / 'bare.db').exists()
+
+
+def test_bench_estimate_table_and_summary(tmp_path, capsys) -> None:
+    out = tmp_path / 'bench'
+    code = vbn_main(['bench-estimate', '--out', str(out), '--spacing', '0.5', '--drifts', '2',
+                     '--run', '', '--radius', '1.2'])
+    printed = capsys.readouterr().out
+    rows = json.loads((out / 'summary.json').read_text())
+    assert len(rows) == 1 and rows[0]['drift'] == 2.0 and 'localize' not in rows[0]
+    assert code == (0 if rows[0]['pass'] else 1)
+    assert '| room | 2 | 0 |' in printed and 'targets:' in printed
+    assert rows[0]['result']['position_median'] < rows[0]['odometry']['position_median']
+    assert vbn_main(['bench-estimate', '--out', str(out), '--drifts', 'x']) != 0
+    assert 'numbers' in capsys.readouterr().err

@@ -1,0 +1,159 @@
+"""``vbn bench-estimate``: image poses from images and odometry against the truth (issue 17).
+
+Example::
+
+    vbn bench-estimate --out out/bench_estimate
+    vbn bench-estimate --out out/bench_estimate --scenes room,floor --drifts 1,3 --seeds 0,1
+
+For each scene, drift and seed: renders a driven exploration (``vbn render --kind
+exploration --odometry``, kept in ``OUT/bags``), estimates its poses (``vbn
+estimate-poses --frame truth``) and prints the odometry's, the thesis's and the refined
+errors after an SE(2) alignment with the targets of point 5 (median 1 cm, max 5 cm,
+heading median 0.2 deg). For the room it then builds a database from the estimated poses
+and one from the same bag's ground truth and localizes ``bags/room_run`` with both
+(``vbn localize --one-core``): the estimated database's median and p95 against 1.5 times
+the ground truth's. Everything goes into ``OUT/summary.json``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+import subprocess
+import sys
+from typing import Any
+
+__all__ = ['register', 'run']
+
+#: Point 5's targets: refined image positions (metres), heading (degrees), the database.
+TARGETS = {'position_median': 0.01, 'position_max': 0.05, 'heading_median_deg': 0.2,
+           'localize_ratio': 1.5}
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``bench-estimate`` subcommand."""
+    parser = subparsers.add_parser(
+        'bench-estimate', help='estimated exploration poses against the truth (issue 17)',
+        description='Render driven explorations, estimate their poses from the images and '
+                    'the odometry, judge them against the ground truth, and localize '
+                    'bags/room_run with databases built from estimated and true poses.')
+    parser.add_argument('--out', required=True, metavar='DIR', help='output folder')
+    parser.add_argument('--scenes', default='room', help='scenes, comma separated (room)')
+    parser.add_argument('--drifts', default='1,3', help='odometry drift scales (1,3)')
+    parser.add_argument('--seeds', default='0', help='render seeds (0)')
+    parser.add_argument('--spacing', type=float, default=0.25, help='grid spacing, m (0.25)')
+    parser.add_argument('--radius', type=float, default=None,
+                        help='estimate-poses --radius (default: its own)')
+    parser.add_argument('--run', default='bags/room_run',
+                        help='run localized with the room databases ("" to skip)')
+    parser.set_defaults(func=run)
+
+
+def _vbn(*argv: str, log: Path) -> None:
+    with log.open('w') as out:
+        done = subprocess.run([sys.executable, '-m', 'landmark_db.cli.main', *argv],
+                              stdout=out, stderr=subprocess.STDOUT, check=False)
+    if done.returncode != 0:
+        from visibility_builder.errors import VisibilityBuilderError
+
+        raise VisibilityBuilderError(f'vbn {argv[0]} failed (exit {done.returncode}); see '
+                                     f'{log}')
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark, print the table, write ``summary.json``; 0 when every target holds."""
+    from landmark_db.atomic import write_text_atomic
+    from visibility_builder.errors import VisibilityBuilderError
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'bags').mkdir(exist_ok=True)
+    scenes = [s for s in args.scenes.split(',') if s]
+    try:
+        drifts = [float(d) for d in args.drifts.split(',') if d]
+        seeds = [int(s) for s in args.seeds.split(',') if s]
+    except ValueError as error:
+        raise VisibilityBuilderError(f'--drifts and --seeds take numbers: {error}') from None
+    rows: list[dict[str, Any]] = []
+    for scene in scenes:
+        for drift in drifts:
+            for seed in seeds:
+                rows.append(_one(out, scene, drift, seed, args))
+    lines = ['| scene | drift | seed | odometry median / max | thesis median / max | '
+             'refined median / max, heading | estimate time | room_run: estimated DB '
+             'median / p95 | ground-truth DB | ratio |', '|' + '---|' * 10]
+    passed = True
+    for r in rows:
+        odo, thesis, res = r['odometry'], r['thesis'], r['result']
+        loc = r.get('localize') or {}
+        ratio = loc.get('ratio', float('nan'))
+        lines.append(
+            f"| {r['scene']} | {r['drift']:g} | {r['seed']} | "
+            f"{100 * odo['position_median']:.2f} / {100 * odo['position_max']:.1f} cm | "
+            f"{100 * thesis['position_median']:.2f} / {100 * thesis['position_max']:.2f} cm | "
+            f"{100 * res['position_median']:.2f} / {100 * res['position_max']:.2f} cm, "
+            f"{res['heading_median_deg']:.3f} deg | {sum(r['times'].values()):.0f} s | "
+            + (f"{100 * loc['estimated'][0]:.2f} / {100 * loc['estimated'][1]:.2f} cm | "
+               f"{100 * loc['truth'][0]:.2f} / {100 * loc['truth'][1]:.2f} cm | "
+               f"{ratio:.2f} |" if loc else '- | - | - |'))
+        ok = (res['position_median'] <= TARGETS['position_median']
+              and res['position_max'] <= TARGETS['position_max']
+              and res['heading_median_deg'] <= TARGETS['heading_median_deg']
+              and (not loc or ratio <= TARGETS['localize_ratio']))
+        r['pass'] = ok
+        passed &= ok
+    print('\n'.join(lines))
+    print(f"targets: refined median <= {100 * TARGETS['position_median']:g} cm, max <= "
+          f"{100 * TARGETS['position_max']:g} cm, heading median <= "
+          f"{TARGETS['heading_median_deg']:g} deg; estimated database within "
+          f"{TARGETS['localize_ratio']:g} x the ground truth's median and p95: "
+          + ('PASS' if passed else 'FAIL'))
+    write_text_atomic(out / 'summary.json', json.dumps(rows, indent=2, default=float))
+    return 0 if passed else 1
+
+
+def _one(out: Path, scene: str, drift: float, seed: int, args: argparse.Namespace
+         ) -> dict[str, Any]:
+    name = f'{Path(scene).stem}_s{args.spacing:g}_d{drift:g}_seed{seed}'
+    bag = out / 'bags' / name
+    if not bag.exists():
+        _vbn('render', '--scene', scene, '--kind', 'exploration', '--camera', 'panoramic',
+             '--spacing', str(args.spacing), '--odometry', '--drift', str(drift), '--seed',
+             str(seed), '--compressed', '--out', str(bag), log=out / f'{name}_render.log')
+    estimated = out / f'{name}_estimated'
+    figures = out / f'{name}_estimate.json'
+    if not figures.exists() or not estimated.exists():
+        if estimated.exists():
+            import shutil
+
+            shutil.rmtree(estimated)
+        extra = ['--radius', str(args.radius)] if args.radius else []
+        _vbn('estimate-poses', str(bag), '--out', str(estimated), '--frame', 'truth',
+             '--json', str(figures), '--quiet', *extra, log=out / f'{name}_estimate.log')
+    row = {'scene': scene, 'drift': drift, 'seed': seed, 'bag': str(bag),
+           **json.loads(figures.read_text())}
+    print(f'{name}: refined {100 * row["result"]["position_median"]:.2f} cm median',
+          flush=True)
+    if Path(scene).stem == 'room' and args.run:
+        row['localize'] = _localize(out, name, bag, estimated, Path(args.run))
+    return row
+
+
+def _localize(out: Path, name: str, bag: Path, estimated: Path, run_bag: Path
+              ) -> dict[str, Any]:
+    result: dict[str, Any] = {}
+    for key, source, setting in (('truth', bag, 'read.pose_source=ground_truth'),
+                                 ('estimated', estimated, 'read.pose_source=estimated')):
+        db = out / f'{name}_{key}.db'
+        if not db.exists():
+            _vbn('build', str(source), '--db', str(db), '--set', setting, '--quiet',
+                 log=out / f'{name}_{key}_build.log')
+        figures = out / f'{name}_{key}_localize.json'
+        _vbn('localize', str(run_bag), '--db', str(db), '--out', str(out / f'{name}_{key}_poses'),
+             '--overwrite', '--one-core', '--quiet', '--no-evo', '--json', str(figures),
+             log=out / f'{name}_{key}_localize.log')
+        accuracy = json.loads(figures.read_text())['accuracy']
+        result[key] = (accuracy['translation_median_m'], accuracy['translation_p95_m'])
+    result['ratio'] = max(result['estimated'][0] / result['truth'][0],
+                          result['estimated'][1] / result['truth'][1])
+    return result
