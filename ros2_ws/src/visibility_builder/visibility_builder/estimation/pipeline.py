@@ -47,11 +47,18 @@ import os
 import time
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from vbn_common.errors import VbnCommonError
 from vbn_common.exploration import Exploration, ReadConfig, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
-from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
+from vbn_common.geometry.frames import (
+    BASE_TO_CAMERA_ROTATION,
+    compose_poses,
+    invert_pose,
+    wrap_angle,
+)
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.estimation.positions import fit_positions
 from visibility_builder.estimation.refinement import (
@@ -533,9 +540,6 @@ def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
             'components': components}
 
 
-_OPTICAL_TO_PLANAR = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-
-
 def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[ImageFeatures],
             camera: object, odom_cam: np.ndarray, settings: EstimationSettings
             ) -> RefinementResult | None:
@@ -556,11 +560,10 @@ def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[Imag
                                  for p in chosen])
     if not len(rows):
         return None
+    rows = rows[np.argsort(rows[:, 1], kind='stable')]     # image by image
     uv = np.concatenate([features[i].keypoints[rows[rows[:, 1] == i, 2]]
                          for i in range(len(features))])
-    order = np.concatenate([np.flatnonzero(rows[:, 1] == i) for i in range(len(features))])
-    rows = rows[order]
-    rays = camera.unproject(uv.astype(float)) @ _OPTICAL_TO_PLANAR.T
+    rays = camera.unproject(uv.astype(float)) @ BASE_TO_CAMERA_ROTATION.T
     n = len(features)
     rel = np.array([compose_poses(invert_pose(odom_cam[i]), odom_cam[i + 1])
                     for i in range(n - 1)]).reshape(-1, 3)
@@ -578,9 +581,6 @@ def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[Imag
 
 
 def _components(n: int, edges: np.ndarray) -> list[int]:
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     if len(edges) == 0:
         return [1] * n
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))

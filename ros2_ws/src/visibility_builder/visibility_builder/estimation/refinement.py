@@ -3,7 +3,7 @@
 Issue 17, point 4. Section 6.1 fits rotations, then positions, to pairwise motions: each
 pair's motion is a summary of its matches, and the two fits never see the points
 themselves. The refinement minimises the reprojection errors of every track (a chain
-of pairwise inlier matches joined by union-find, at most one feature per image) over all
+of pairwise inlier matches: a connected component, at most one feature per image) over all
 image poses and all points at once, with
 
 - the odometry as relative-pose factors between consecutive images (its standard
@@ -31,8 +31,11 @@ from dataclasses import dataclass
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from vbn_common.geometry.camera import CameraModel, pixels_per_radian
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from vbn_common.geometry.rays import intersect_rays
 from visibility_builder.errors import VisibilityBuilderError
 
@@ -40,8 +43,6 @@ __all__ = ['RefinementResult', 'RefinementSettings', 'refine_poses', 'tracks_fro
 
 #: Virtual sensors: one per this many degrees of azimuth.
 SECTOR_DEG = 45.0
-#: Optical (z forward, x right, y down) into the planar camera frame (x forward, y left).
-_OPTICAL_TO_PLANAR = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
 @dataclass(frozen=True)
@@ -91,8 +92,10 @@ class RefinementResult:
 
 
 def tracks_from_pairs(n_features: list[int], pair_views: np.ndarray,
-                      pair_features: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Join pairwise matches into tracks (union-find); drop tracks seen twice in one image.
+                      pair_features: list[np.ndarray]) -> tuple[np.ndarray, int]:
+    """Join pairwise matches into tracks; drop tracks seen twice in one image.
+
+    A track is a connected component of the graph of matched features.
 
     Args:
         n_features: Features per image.
@@ -104,29 +107,13 @@ def tracks_from_pairs(n_features: list[int], pair_views: np.ndarray,
     """
     offsets = np.concatenate([[0], np.cumsum(n_features)]).astype(np.int64)
     total = int(offsets[-1])
-    parent = np.arange(total, dtype=np.int64)
-
-    def find(x: np.ndarray) -> np.ndarray:
-        root = x.copy()
-        while True:
-            nxt = parent[root]
-            if np.array_equal(nxt, root):
-                return root
-            root = nxt
-
     edges = [np.stack([offsets[a] + f[:, 0], offsets[b] + f[:, 1]], axis=1)
              for (a, b), f in zip(pair_views, pair_features, strict=True) if len(f)]
     if not edges:
         return np.zeros((0, 3), np.int64), 0
     edges = np.concatenate(edges)
-    for _ in range(64):   # union by pointing roots at the smaller root, until stable
-        ra, rb = find(edges[:, 0]), find(edges[:, 1])
-        differ = ra != rb
-        if not differ.any():
-            break
-        lo, hi = np.minimum(ra, rb)[differ], np.maximum(ra, rb)[differ]
-        np.minimum.at(parent, hi, lo)
-    roots = find(np.arange(total))
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(total, total))
+    _, roots = connected_components(graph, directed=False)
     used = np.zeros(total, bool)
     used[edges.ravel()] = True
     nodes = np.flatnonzero(used)
@@ -135,8 +122,8 @@ def tracks_from_pairs(n_features: list[int], pair_views: np.ndarray,
     _, track = np.unique(roots[nodes], return_inverse=True)
     # A track with two features of one image joined two different points: drop it.
     key = track * (len(n_features) + 1) + image
-    _, counts = np.unique(key, return_counts=True)
-    doubled = np.unique(track[np.isin(key, np.unique(key)[counts > 1])])
+    keys, counts = np.unique(key, return_counts=True)
+    doubled = np.unique(track[np.isin(key, keys[counts > 1])])
     keep = ~np.isin(track, doubled)
     track, image, feature = track[keep], image[keep], feature[keep]
     _, track = np.unique(track, return_inverse=True)
@@ -147,7 +134,7 @@ def _sensor_rotation(azimuth: float) -> np.ndarray:
     """Rotation of a virtual optical sensor looking along ``azimuth`` into the body frame."""
     c, s = math.cos(azimuth), math.sin(azimuth)
     yaw = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    return yaw @ _OPTICAL_TO_PLANAR
+    return yaw @ BASE_TO_CAMERA_ROTATION   # optical into planar, then turned
 
 
 def refine_poses(camera_poses: np.ndarray, observations: np.ndarray, rays: np.ndarray,

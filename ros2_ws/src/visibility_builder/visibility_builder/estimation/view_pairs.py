@@ -23,7 +23,7 @@ turning on the spot) have no direction between them: the solvers refuse them and
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
 
 import numpy as np
@@ -31,6 +31,7 @@ import numpy as np
 from vbn_common.errors import VbnCommonError
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.camera import CameraModel, pixels_per_radian
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from vbn_common.geometry.motion import TwoViewConfig
 from vbn_common.geometry.two_view import relative_motion
 from visibility_builder.pair_matching import match_pose_pair
@@ -134,10 +135,7 @@ def measure_pair(i: int, j: int, a: ImageFeatures, b: ImageFeatures, camera: Cam
                                  config=settings.two_view, rng=rng)
     except VbnCommonError as error:
         if 'same place' in str(error):
-            motion, why = rotation_only(i, j, uv_a, uv_b, camera, settings)
-            if motion is not None:
-                motion = replace(motion, features=pairs[motion.features])
-            return motion, why
+            return rotation_only(i, j, uv_a, uv_b, camera, settings, pairs)
         return None, str(error)
     inliers = int(motion.inliers.sum())
     if inliers < settings.min_inliers:
@@ -157,17 +155,18 @@ def measure_pair(i: int, j: int, a: ImageFeatures, b: ImageFeatures, camera: Cam
 
 
 def rotation_only(i: int, j: int, uv_a: np.ndarray, uv_b: np.ndarray, camera: CameraModel,
-                  settings: PairSettings) -> tuple[PairMotion | None, str]:
+                  settings: PairSettings, matches: np.ndarray | None = None
+                  ) -> tuple[PairMotion | None, str]:
     """Measure the rotation between two views taken at one place (no translation).
 
     Rays of matched features: ``b = R a`` for a pure rotation. RANSAC over pairs of
     matches (Kabsch on two rays), the rotation then refitted on the inliers.
+    ``matches``: the feature indices of the rows of ``uv_a`` and ``uv_b`` (the motion's
+    ``features``; default: the row numbers).
     """
-    rays_a = camera.unproject(uv_a)
-    rays_b = camera.unproject(uv_b)
-    # Optical (z forward) into planar REP 103 frames (x forward, y left, z up).
-    to_planar = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
-    a, b = rays_a @ to_planar.T, rays_b @ to_planar.T
+    # Optical (z forward) rays into planar REP 103 frames (x forward, y left, z up).
+    a = camera.unproject(uv_a) @ BASE_TO_CAMERA_ROTATION.T
+    b = camera.unproject(uv_b) @ BASE_TO_CAMERA_ROTATION.T
     f = pixels_per_radian(camera)
     threshold = settings.two_view.threshold_px / f
     rng = np.random.default_rng([settings.seed, i, j, 1])
@@ -187,9 +186,11 @@ def rotation_only(i: int, j: int, uv_a: np.ndarray, uv_b: np.ndarray, camera: Ca
     residual = float(np.sqrt(np.mean(errors ** 2)))
     noise = max(residual, settings.two_view.noise_floor_px / f)
     std = _inflation(n, int(inliers.sum())) * noise / math.sqrt(int(inliers.sum()))
+    if matches is None:
+        matches = np.repeat(np.arange(n)[:, None], 2, axis=1)
     return PairMotion(i, j, rotation, np.full(3, np.nan), std, math.inf, n,
                       int(inliers.sum()), residual, 'rotation_only',
-                      np.flatnonzero(inliers)), ''
+                      np.asarray(matches, np.int64)[inliers]), ''
 
 
 def _kabsch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
