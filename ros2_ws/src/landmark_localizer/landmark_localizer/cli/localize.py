@@ -87,9 +87,9 @@ def use_one_core() -> str:
     """
     for name in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
         os.environ.setdefault(name, '1')
-    import cv2
+    from landmark_localizer.node_support import one_thread_per_library
 
-    cv2.setNumThreads(1)
+    one_thread_per_library()   # as the node does (and OpenBLAS already loaded, too)
     done = [f'OPENBLAS_NUM_THREADS={os.environ["OPENBLAS_NUM_THREADS"]}',
             'cv2.setNumThreads(1)']
     if hasattr(os, 'sched_setaffinity'):

@@ -29,7 +29,7 @@ from scipy.sparse.csgraph import dijkstra
 from landmark_db.scene import Scene
 from vbn_common.geometry.frames import wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.synthesis.trajectory import RunParameters, Trajectory, _lattice_graph
+from visibility_builder.synthesis.trajectory import RunParameters, Trajectory, lattice_graph
 
 __all__ = ['DWELL_S', 'TURN_ACCEL', 'DrivenExploration', 'driven_exploration',
            'visiting_order']
@@ -154,7 +154,7 @@ class _Router:
             return [b]
         if self._lattice is None:
             lattice = RunParameters(clearance=self.clearance, lattice=self.params.lattice)
-            nodes, _, graph = _lattice_graph(self.scene, lattice)
+            nodes, _, graph = lattice_graph(self.scene, lattice)
             self._lattice = (nodes, graph)
         nodes, graph = self._lattice
         start = int(np.argmin(np.linalg.norm(nodes - a, axis=1)))

@@ -29,7 +29,8 @@ from landmark_db.scene import Scene
 from vbn_common.geometry.frames import wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
 
-__all__ = ['RunParameters', 'Trajectory', 'kidnapped_trajectory', 'run_trajectory']
+__all__ = ['RunParameters', 'Trajectory', 'kidnapped_trajectory', 'lattice_graph',
+           'run_trajectory']
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,12 @@ class Trajectory:
         return out
 
 
-def _lattice_graph(scene: Scene, params: RunParameters) -> tuple[np.ndarray, np.ndarray, object]:
+def lattice_graph(scene: Scene, params: RunParameters) -> tuple[np.ndarray, np.ndarray, object]:
+    """Return the free lattice nodes, their clearances and their 8-connected graph.
+
+    Nodes keep ``params.clearance`` from walls; edges are weighted to stay away from them
+    (the runs' and the driven explorations' shortest paths).
+    """
     xmin, ymin, xmax, ymax = scene.bounds()
     step = params.lattice
     xs = np.arange(xmin + step / 2, xmax, step)
@@ -269,7 +275,7 @@ def run_trajectory(scene: Scene, params: RunParameters | None = None,
         VisibilityBuilderError: the scene leaves no room to drive.
     """
     params = params or RunParameters()
-    nodes, clearance, graph = _lattice_graph(scene, params)
+    nodes, clearance, graph = lattice_graph(scene, params)
     waypoints = _waypoints(scene, nodes, clearance, params)
     polyline = _plan(nodes, graph, waypoints)
     if np.sum(np.linalg.norm(np.diff(polyline, axis=0), axis=1)) < 2 * params.lattice:
