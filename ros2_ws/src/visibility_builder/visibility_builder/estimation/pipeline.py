@@ -14,22 +14,21 @@ Steps (each timed and counted in :class:`PoseEstimation`):
    beyond 30 degrees) is refused: a planar scene lets a pinhole solver fit a second
    motion as well as the true one (on a pinhole room: rotation errors median 0.96 ->
    0.13 deg, directions 13 -> 0.5 deg).
-4. **Rotations** (6.1.3, :mod:`.rotations`) over the measured relative rotations and,
-   beside them, the odometry's turn between consecutive images (weighted by its own
-   uncertainty, so that views no image pair joins stay connected). Pairs whose rotation
-   disagrees with the fit by more than four of their standard deviations and four
-   robust standard deviations of all pairs' misses are dropped and the fit repeated.
-5. **Positions** (6.1.4, :mod:`.positions`): the directions carried into the world by
-   the fitted rotations; with the odometry's displacements between consecutive
-   stations beside them (its scale), outliers dropped.
+4. **Rotations** (6.1.3, :mod:`.rotations`) over the measured relative rotations and
+   the odometry's turns, robustly (:mod:`.global_fit`: least-absolute angles first for
+   a planar robot, then the thesis's least squares over the pairs they keep).
+5. **Positions** (6.1.4, :mod:`.positions`): each pair's bearing refitted under the
+   fitted turns, carried into the world; the thesis's system, the linear joint system
+   with the odometry's displacements between consecutive stations, and (planar) the
+   robust non-linear fit of bearings and odometry that the linear fits seed.
 6. **Pairs, second pass**: the pairs of stations within ``radius_m`` of each other in
    that estimate that the first pass did not try (the exploration's other rows, a
    loop's return), measured and checked against that estimate, then rotations and
    positions fitted again over all.
 7. **The thesis's own result**: the positions from the directions alone (no odometry
-   rows), scaled by the length of the odometry's path: the result when the directions
-   fix every position, else the joint solve (directions and odometry rows, which also
-   chose the second pass's pairs). Either is the bundle adjustment's start.
+   rows), scaled by the length of the odometry's path, kept beside the joint estimate
+   (the robust fit where there is one); the joint estimate is the bundle adjustment's
+   start.
 8. **Frame**: ``map`` is the odometry's frame at the first image (the first image's
    estimated pose is its odometry pose; REP 105's ``map`` and ``odom`` start equal).
 
@@ -47,8 +46,6 @@ import os
 import time
 
 import numpy as np
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from vbn_common.errors import VbnCommonError
 from vbn_common.exploration import Exploration, ReadConfig, read_exploration
@@ -60,21 +57,14 @@ from vbn_common.geometry.frames import (
     wrap_angle,
 )
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.estimation.positions import fit_positions
+from visibility_builder.estimation.global_fit import fit_views
 from visibility_builder.estimation.refinement import (
     RefinementResult,
     RefinementSettings,
     refine_poses,
     tracks_from_pairs,
 )
-from visibility_builder.estimation.rotations import (
-    fit_rotations,
-    quat_conj,
-    quat_from_yaw,
-    quat_mul,
-    quat_to_matrix,
-    quat_yaw,
-)
+from visibility_builder.estimation.rotations import matrix_to_quat, quat_yaw
 from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
 
 __all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_from_odometry', 'estimate_poses',
@@ -179,26 +169,6 @@ class PoseEstimation:
     refinement: RefinementResult | None = None
 
 
-def matrix_to_quat(r: np.ndarray) -> np.ndarray:
-    """Return the unit quaternion ``(w, x, y, z)`` of a rotation matrix (Shepperd)."""
-    r = np.asarray(r, float)
-    trace = np.trace(r)
-    if trace > 0:
-        s = 2.0 * math.sqrt(trace + 1.0)
-        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
-    else:
-        k = int(np.argmax(np.diag(r)))
-        a, b = (k + 1) % 3, (k + 2) % 3
-        s = 2.0 * math.sqrt(max(1.0 + r[k, k] - r[a, a] - r[b, b], 1e-300))
-        q = [0.0] * 4
-        q[0] = (r[b, a] - r[a, b]) / s
-        q[1 + k] = 0.25 * s
-        q[1 + a] = (r[a, k] + r[k, a]) / s
-        q[1 + b] = (r[b, k] + r[k, b]) / s
-    q = np.array(q)
-    return q / np.linalg.norm(q)
-
-
 def _stations(odom: np.ndarray, tolerance: float) -> np.ndarray:
     station = np.zeros(len(odom), np.int64)
     start = 0
@@ -284,7 +254,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         todo = [c for c in candidates if c not in measured and (c[1], c[0]) not in measured]
         tried[name] = len(todo)
         for k, (i, j) in enumerate(todo):
-            motion, why = measure_pair(i, j, features[i], features[j], camera, settings.pairs)
+            motion, why = measure_pair(i, j, features[i], features[j], camera, settings.pairs,
+                                       moved=bool(station[i] != station[j]))
             if motion is not None:
                 driven = abs(float(path[j] - path[i]))
                 why = _disagrees(motion, compose_poses(invert_pose(reference[i]), reference[j]),
@@ -321,7 +292,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                                      f'{settings.pairs.min_matches} matches that one motion '
                                      'explains')
     t = time.perf_counter()
-    fit = _fit(n, station, odom_base, mount, measured, settings)
+    fit = fit_views(n, station, odom_base, mount, measured, settings,
+               (features, camera, settings.pairs))
     times['fit (first)'] = time.perf_counter() - t
     # Second pass: near in space.
     cam = fit['camera']
@@ -340,7 +312,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
             second.append((i, j))
     measure(second, 'second', cam, np.zeros(n), np.zeros(n))
     t = time.perf_counter()
-    fit = _fit(n, station, odom_base, mount, measured, settings)
+    fit = fit_views(n, station, odom_base, mount, measured, settings,
+               (features, camera, settings.pairs))
     times['fit (final)'] = time.perf_counter() - t
     pairs = list(measured.values())
     refined = None
@@ -352,8 +325,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                       else np.full(3, np.nan) for c in fit['camera']])
     thesis = np.array([compose_poses(c, invert_pose(mount)) if np.all(np.isfinite(c))
                        else np.full(3, np.nan) for c in fit['thesis']])
-    # The directions alone fix every image, or the joint solve (one frame, not a mix).
-    unrefined = thesis if np.isfinite(thesis).all() else joint
+    # The joint fit, or the directions alone where it failed (one frame, not a mix).
+    unrefined = joint if np.isfinite(joint).all() else thesis
     base = unrefined
     if refined is not None:
         base = np.array([compose_poses(c, invert_pose(mount)) for c in refined.camera_poses])
@@ -435,118 +408,13 @@ def estimate_from_odometry(bag: str | os.PathLike[str], read: ReadConfig,
     return estimated_exploration(odometry, result)
 
 
-def _fit(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
-         measured: dict[tuple[int, int], PairMotion], settings: EstimationSettings
-         ) -> dict[str, object]:
-    """Rotations, then positions (with and without odometry), in the ``map`` frame."""
-    pairs = list(measured.values())
-    odom_cam = np.array([compose_poses(p, mount) for p in odom_base])
-    # -- rotations (6.1.3): image pairs plus the odometry's turns ---------------------------
-    ij = np.array([(p.i, p.j) for p in pairs], np.int64).reshape(-1, 2)
-    rel = np.array([matrix_to_quat(p.rotation) for p in pairs]).reshape(-1, 4)
-    w = np.array([1.0 / p.rotation_std ** 2 for p in pairs])
-    turn = wrap_angle(np.diff(odom_cam[:, 2]))
-    driven = np.linalg.norm(np.diff(odom_base[:, :2], axis=0), axis=1)
-    odo_std = settings.odometry_yaw_floor + settings.odometry_turn_std * np.abs(turn) + \
-        settings.odometry_yaw_drift_std * driven
-    odo_ij = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
-    odo_rel = quat_from_yaw(-turn)             # camera i's planar frame into i+1's
-    kept = np.ones(len(pairs), bool)
-    for _ in range(6):
-        all_ij = np.concatenate([ij[kept], odo_ij])
-        all_rel = np.concatenate([rel[kept], odo_rel])
-        all_w = np.concatenate([w[kept], 1.0 / odo_std ** 2])
-        rot = fit_rotations(n, all_ij, all_rel, all_w, anchor=0)
-        error = np.full(len(pairs), 0.0)
-        if len(pairs):
-            q = rot.quaternions
-            err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
-            error = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
-        std = np.array([p.rotation_std for p in pairs])
-        # Outliers: beyond 4 of their own standard deviations and 4 robust standard
-        # deviations of the kept pairs' errors (a wrong mode of a solver can be tens of
-        # times off its claimed precision and yet within a fixed threshold).
-        spread = 4.0 * 1.4826 * float(np.median(error[kept])) if kept.any() else 0.0
-        bad = kept & (error > np.maximum(4.0 * std, max(
-            spread, math.radians(settings.max_rotation_error_deg))))
-        if not bad.any():
-            break
-        kept &= ~bad
-    # The fit's world is camera 0's planar frame; map -> camera 0 is its odometry heading:
-    # q_i then rotates map into camera i's frame, and yaw_i = -angle about z.
-    q = quat_mul(rot.quaternions, quat_from_yaw(-odom_cam[0, 2]))
-    yaw = -quat_yaw(q)
-    to_world = np.transpose(quat_to_matrix(q), (0, 2, 1))   # camera i's frame into map
-    # -- positions (6.1.4) over stations -----------------------------------------------------
-    has_dir = np.array([p.has_direction for p in pairs], bool) & kept
-    idx = np.flatnonzero(has_dir & (station[ij[:, 0]] != station[ij[:, 1]])) \
-        if len(pairs) else np.zeros(0, np.int64)
-    s_ij = station[ij[idx]] if len(idx) else np.zeros((0, 2), np.int64)
-    dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx]).reshape(-1, 3)
-    planar = all(pairs[k].method != 'general_essential' for k in idx)
-    d = 2 if planar else 3
-    dirs = dirs[:, :d]
-    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-12)
-    n_st = int(station.max()) + 1
-    first_of = np.array([np.flatnonzero(station == s)[0] for s in range(n_st)])
-    st_odom = odom_base[first_of]
-    length = np.linalg.norm(st_odom[s_ij[:, 1], :2] - st_odom[s_ij[:, 0], :2], axis=1) \
-        if len(idx) else np.zeros(0)
-    dstd = np.array([pairs[k].direction_std for k in idx])
-    w_dir = 1.0 / (np.maximum(dstd, 1e-4) * np.maximum(length, 0.05)) ** 2
-    # Odometry displacements between consecutive stations, into the world frame.
-    a_st, b_st = np.arange(n_st - 1), np.arange(1, n_st)
-    delta = st_odom[b_st, :2] - st_odom[a_st, :2]
-    base_yaw_est = yaw[first_of] - mount[2]
-    turn_to_world = base_yaw_est[a_st] - st_odom[a_st, 2]
-    c, s = np.cos(turn_to_world), np.sin(turn_to_world)
-    disp = np.stack([c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]], 1)
-    if d == 3:
-        disp = np.concatenate([disp, np.zeros((len(disp), 1))], axis=1)
-    o_std = settings.odometry_std_floor_m + settings.odometry_std_per_m * \
-        np.linalg.norm(delta, axis=1)
-    odometry = (np.stack([a_st, b_st], 1), disp, 1.0 / o_std ** 2)
-    max_angle = math.radians(settings.max_direction_error_deg)
-    combined = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, odometry=odometry,
-                             max_angle=max_angle)
-    kept_direction = np.zeros(len(pairs), bool)
-    kept_direction[idx[combined.kept]] = True
-    # The thesis's system: directions alone, scaled by the odometry's path length.
-    thesis_pos = np.full((n_st, d), np.nan)
-    if len(idx):
-        try:
-            alone = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, max_angle=max_angle)
-            steps = np.linalg.norm(np.diff(alone.positions[:, :2], axis=0), axis=1)
-            odo_steps = np.linalg.norm(delta, axis=1)
-            ok = np.isfinite(steps)
-            if ok.any() and steps[ok].sum() > 0:
-                thesis_pos = alone.positions * (odo_steps[ok].sum() / steps[ok].sum())
-        except VisibilityBuilderError as error:
-            _LOG.warning('positions from the directions alone: %s', error)
-    components = _components(n_st, s_ij[combined.kept] if len(idx) else s_ij)
-    origin = odom_cam[0, :2]
-
-    def place(positions: np.ndarray) -> np.ndarray:
-        out = np.full((n, 3), np.nan)
-        xy = positions[station, :2] + origin
-        out[:, :2] = xy
-        out[:, 2] = wrap_angle(yaw)
-        out[~np.isfinite(xy).all(axis=1)] = np.nan
-        return out
-
-    # Positions are the cameras' (mount included): the first camera at its odometry pose.
-    return {'camera': place(combined.positions), 'thesis': place(thesis_pos),
-            'kept_rotation': kept, 'kept_direction': kept_direction,
-            'components': components}
-
-
 def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[ImageFeatures],
             camera: object, odom_cam: np.ndarray, settings: EstimationSettings
             ) -> RefinementResult | None:
     """Bundle-adjust the fitted camera poses over the kept pairs' tracks and the odometry."""
-    start = np.asarray(fit['thesis'], float)
+    start = np.asarray(fit['camera'], float)
     if not np.isfinite(start).all():
-        start = np.asarray(fit['camera'], float)
+        start = np.asarray(fit['thesis'], float)
     if not np.isfinite(start).all():
         _LOG.warning('refinement skipped: some images have no pose to start from')
         return None
@@ -578,11 +446,3 @@ def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[Imag
     except VisibilityBuilderError as error:
         _LOG.warning('refinement skipped: %s', error)
         return None
-
-
-def _components(n: int, edges: np.ndarray) -> list[int]:
-    if len(edges) == 0:
-        return [1] * n
-    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    count, labels = connected_components(graph, directed=False)
-    return sorted(np.bincount(labels, minlength=count).tolist(), reverse=True)

@@ -1,0 +1,206 @@
+"""The views' rotations, then their positions, from the measured pairs (thesis 6.1.3, 6.1.4).
+
+:func:`fit_views` is steps 4, 5 and 7 of :mod:`.pipeline`:
+
+- **Rotations** (6.1.3, :mod:`.rotations`) over the pairs' relative rotations and the
+  odometry's turns between consecutive images (weighted by their own uncertainty, so
+  that views no pair joins stay connected). For a planar robot the least-absolute
+  angles (:func:`~.rotations.planar_l1_angles`) start the fit and the pairs they leave
+  far off are dropped first; then pairs missing the fit by more than four of their
+  standard deviations and four robust standard deviations of all pairs' misses are
+  dropped and the fit repeated.
+- **Bearings** refitted under the fitted turns (:func:`~.view_pairs.bearings_given_turns`,
+  planar pairs), carried into the world by the fitted rotations.
+- **Positions** (6.1.4, :mod:`.positions`) over stations: the thesis's directions alone
+  (null vector, scaled by the odometry's path length); the linear joint system of
+  directions and odometry displacements (which reaches views the directions leave
+  free); and, for a planar robot, the robust non-linear fit of the bearings and the
+  odometry seeded by one of them
+  (:func:`~.positions.refine_planar_positions`: the linear fits' shrinkage removed).
+  The last is the estimate (``camera``), the first is reported beside it (``thesis``).
+"""
+from __future__ import annotations
+
+import logging
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from vbn_common.features import ImageFeatures
+from vbn_common.geometry.frames import compose_poses, wrap_angle
+from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.estimation.positions import fit_positions, refine_planar_positions
+from visibility_builder.estimation.rotations import (
+    fit_rotations,
+    matrix_to_quat,
+    planar_l1_angles,
+    quat_conj,
+    quat_from_yaw,
+    quat_mul,
+    quat_to_matrix,
+    quat_yaw,
+)
+from visibility_builder.estimation.view_pairs import (
+    PairMotion,
+    PairSettings,
+    bearings_given_turns,
+)
+
+if TYPE_CHECKING:
+    from visibility_builder.estimation.pipeline import EstimationSettings
+
+__all__ = ['fit_views']
+
+_LOG = logging.getLogger(__name__)
+
+
+def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
+         measured: dict[tuple[int, int], PairMotion], settings: EstimationSettings,
+         refit: tuple[list[ImageFeatures], object, PairSettings] | None = None
+         ) -> dict[str, object]:
+    """Rotations, then positions (with and without odometry), in the ``map`` frame.
+
+    ``refit``: ``(features, camera, pair settings)`` to refit each pair's bearing under
+    the fitted rotations (planar pairs), or None to take the pairs' own.
+    """
+    pairs = list(measured.values())
+    odom_cam = np.array([compose_poses(p, mount) for p in odom_base])
+    # -- rotations (6.1.3): image pairs plus the odometry's turns ---------------------------
+    ij = np.array([(p.i, p.j) for p in pairs], np.int64).reshape(-1, 2)
+    rel = np.array([matrix_to_quat(p.rotation) for p in pairs]).reshape(-1, 4)
+    w = np.array([1.0 / p.rotation_std ** 2 for p in pairs])
+    turn = wrap_angle(np.diff(odom_cam[:, 2]))
+    driven = np.linalg.norm(np.diff(odom_base[:, :2], axis=0), axis=1)
+    odo_std = settings.odometry_yaw_floor + settings.odometry_turn_std * np.abs(turn) + \
+        settings.odometry_yaw_drift_std * driven
+    odo_ij = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
+    odo_rel = quat_from_yaw(-turn)             # camera i's planar frame into i+1's
+    std = np.array([p.rotation_std for p in pairs])
+    kept = np.ones(len(pairs), bool)
+    guess = None
+    if all(p.method != 'general_essential' for p in pairs):
+        # A planar robot: the robust (L1) angles start the fit, their far misses dropped.
+        start = np.concatenate([[0.0], np.cumsum(quat_yaw(odo_rel))])
+        angles = planar_l1_angles(n, np.concatenate([ij, odo_ij]),
+                                  np.concatenate([quat_yaw(rel), quat_yaw(odo_rel)]),
+                                  np.sqrt(np.concatenate([w, 1.0 / odo_std ** 2])), start)
+        guess = quat_from_yaw(angles)
+        if len(pairs):
+            miss = np.abs(wrap_angle(angles[ij[:, 1]] - angles[ij[:, 0]] - quat_yaw(rel)))
+            kept = miss <= np.maximum(4.0 * std, max(
+                4.0 * 1.4826 * float(np.median(miss)),
+                math.radians(settings.max_rotation_error_deg)))
+    for _ in range(6):
+        all_ij = np.concatenate([ij[kept], odo_ij])
+        all_rel = np.concatenate([rel[kept], odo_rel])
+        all_w = np.concatenate([w[kept], 1.0 / odo_std ** 2])
+        rot = fit_rotations(n, all_ij, all_rel, all_w, anchor=0, guess=guess)
+        error = np.full(len(pairs), 0.0)
+        if len(pairs):
+            q = rot.quaternions
+            err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
+            error = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
+        # Outliers: beyond 4 of their own standard deviations and 4 robust standard
+        # deviations of the kept pairs' errors (a wrong mode of a solver can be tens of
+        # times off its claimed precision and yet within a fixed threshold).
+        spread = 4.0 * 1.4826 * float(np.median(error[kept])) if kept.any() else 0.0
+        bad = kept & (error > np.maximum(4.0 * std, max(
+            spread, math.radians(settings.max_rotation_error_deg))))
+        if not bad.any():
+            break
+        kept &= ~bad
+    # The fit's world is camera 0's planar frame; map -> camera 0 is its odometry heading:
+    # q_i then rotates map into camera i's frame, and yaw_i = -angle about z.
+    q = quat_mul(rot.quaternions, quat_from_yaw(-odom_cam[0, 2]))
+    yaw = -quat_yaw(q)
+    to_world = np.transpose(quat_to_matrix(q), (0, 2, 1))   # camera i's frame into map
+    # -- positions (6.1.4) over stations -----------------------------------------------------
+    has_dir = np.array([p.has_direction for p in pairs], bool) & kept
+    idx = np.flatnonzero(has_dir & (station[ij[:, 0]] != station[ij[:, 1]])) \
+        if len(pairs) else np.zeros(0, np.int64)
+    s_ij = station[ij[idx]] if len(idx) else np.zeros((0, 2), np.int64)
+    dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx]).reshape(-1, 3)
+    dstd = np.array([pairs[k].direction_std for k in idx])
+    planar = all(pairs[k].method != 'general_essential' for k in idx)
+    d = 2 if planar else 3
+    if planar and len(idx) and refit is not None:
+        # Each bearing refitted under the fitted turn (view_pairs.bearings_given_turns).
+        chosen = [pairs[k] for k in idx]
+        features, camera, pair_settings = refit
+        bearing, dstd = bearings_given_turns(
+            chosen, np.array([yaw[p.j] - yaw[p.i] for p in chosen]), features, camera,
+            pair_settings)
+        heading = yaw[ij[idx, 0]] + bearing
+        dirs = np.stack([np.cos(heading), np.sin(heading), np.zeros(len(idx))], axis=1)
+    dirs = dirs[:, :d]
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-12)
+    n_st = int(station.max()) + 1
+    first_of = np.array([np.flatnonzero(station == s)[0] for s in range(n_st)])
+    st_odom = odom_base[first_of]
+    length = np.linalg.norm(st_odom[s_ij[:, 1], :2] - st_odom[s_ij[:, 0], :2], axis=1) \
+        if len(idx) else np.zeros(0)
+    w_dir = 1.0 / (np.maximum(dstd, 1e-4) * np.maximum(length, 0.05)) ** 2
+    # Odometry displacements between consecutive stations, into the world frame.
+    a_st, b_st = np.arange(n_st - 1), np.arange(1, n_st)
+    delta = st_odom[b_st, :2] - st_odom[a_st, :2]
+    base_yaw_est = yaw[first_of] - mount[2]
+    turn_to_world = base_yaw_est[a_st] - st_odom[a_st, 2]
+    c, s = np.cos(turn_to_world), np.sin(turn_to_world)
+    disp = np.stack([c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]], 1)
+    if d == 3:
+        disp = np.concatenate([disp, np.zeros((len(disp), 1))], axis=1)
+    o_std = settings.odometry_std_floor_m + settings.odometry_std_per_m * \
+        np.linalg.norm(delta, axis=1)
+    odometry = (np.stack([a_st, b_st], 1), disp, 1.0 / o_std ** 2)
+    max_angle = math.radians(settings.max_direction_error_deg)
+    combined = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, odometry=odometry,
+                             max_angle=max_angle)
+    kept_direction = np.zeros(len(pairs), bool)
+    kept_direction[idx[combined.kept]] = True
+    # The thesis's system: directions alone, scaled by the odometry's path length.
+    thesis_pos = np.full((n_st, d), np.nan)
+    if len(idx):
+        try:
+            alone = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, max_angle=max_angle)
+            steps = np.linalg.norm(np.diff(alone.positions[:, :2], axis=0), axis=1)
+            odo_steps = np.linalg.norm(delta, axis=1)
+            ok = np.isfinite(steps)
+            if ok.any() and steps[ok].sum() > 0:
+                thesis_pos = alone.positions * (odo_steps[ok].sum() / steps[ok].sum())
+        except VisibilityBuilderError as error:
+            _LOG.warning('positions from the directions alone: %s', error)
+    joint_pos = combined.positions
+    if d == 2 and len(idx):
+        # The linear fits' bias removed: bearings and odometry, non-linear and robust.
+        seed = thesis_pos if np.isfinite(thesis_pos).all() else combined.positions
+        if np.isfinite(seed).all():
+            joint_pos, miss = refine_planar_positions(
+                seed, s_ij, np.arctan2(dirs[:, 1], dirs[:, 0]), dstd, odometry)
+            kept_direction[:] = False
+            kept_direction[idx[miss <= 3.0 * dstd]] = True
+    components = _components(n_st, s_ij[combined.kept] if len(idx) else s_ij)
+    origin = odom_cam[0, :2]
+
+    def place(positions: np.ndarray) -> np.ndarray:
+        out = np.full((n, 3), np.nan)
+        xy = positions[station, :2] + origin
+        out[:, :2] = xy
+        out[:, 2] = wrap_angle(yaw)
+        out[~np.isfinite(xy).all(axis=1)] = np.nan
+        return out
+
+    # Positions are the cameras' (mount included): the first camera at its odometry pose.
+    return {'camera': place(joint_pos), 'thesis': place(thesis_pos),
+            'kept_rotation': kept, 'kept_direction': kept_direction,
+            'components': components}
+
+
+def _components(n: int, edges: np.ndarray) -> list[int]:
+    if len(edges) == 0:
+        return [1] * n
+    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    return sorted(np.bincount(labels, minlength=count).tolist(), reverse=True)
