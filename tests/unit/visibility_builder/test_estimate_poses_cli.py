@@ -59,6 +59,26 @@ def test_poses_from_images_and_odometry_beat_the_odometry(driven, estimated) -> 
     assert mine.base_poses()[0] == pytest.approx(odom.base_poses()[0], abs=1e-6)
 
 
+def test_a_known_distance_sets_the_scale(driven, estimated, tmp_path) -> None:
+    """At three times the drift the odometry's wheels are off; a measured distance is not."""
+    _, by_odometry = estimated
+    truth = read_exploration(driven, ReadConfig(pose_source='ground_truth')).base_poses()
+    first, second = 0, int(np.argmax(np.linalg.norm(truth[:, :2] - truth[0, :2], axis=1)))
+    metres = float(np.linalg.norm(truth[second, :2] - truth[first, :2]))
+    out, figures_path = tmp_path / 'known', tmp_path / 'known.json'
+    assert vbn_main(['estimate-poses', str(driven), '--out', str(out), '--radius', '1.2',
+                     '--known-distance', str(first), str(second), f'{metres:.4f}',
+                     '--json', str(figures_path), '--quiet']) == 0
+    figures = json.loads(figures_path.read_text())
+    mine = read_exploration(out, ReadConfig(pose_source='estimated')).base_poses()
+    assert np.linalg.norm(mine[second, :2] - mine[first, :2]) == pytest.approx(metres, abs=1e-4)
+    assert abs(figures['result_scale'] - 1) < abs(by_odometry['result_scale'] - 1)
+    assert abs(figures['result_scale'] - 1) < 5e-4
+    # the first image stays at its odometry pose (the map frame)
+    odom = read_exploration(driven, ReadConfig(pose_source='tf', map_frame='odom'))
+    assert mine[0] == pytest.approx(odom.base_poses()[0], abs=1e-6)
+
+
 def test_build_reads_the_estimated_poses(estimated, tmp_path) -> None:
     out, _ = estimated
     db = tmp_path / 'room.db'
@@ -75,7 +95,13 @@ def test_bad_input_is_one_line_and_writes_nothing(driven, tmp_path, capsys) -> N
             (['estimate-poses', str(plain), '--out', str(tmp_path / 'a')], 'no odometry'),
             (['estimate-poses', str(driven), '--out', str(driven)], 'exists already'),
             (['estimate-poses', str(tmp_path / 'missing'), '--out', str(tmp_path / 'b')],
-             'missing')):
+             'missing'),
+            (['estimate-poses', str(driven), '--out', str(tmp_path / 'a'), '--known-distance',
+              '3', '3', '1.0'], 'two different'),
+            (['estimate-poses', str(driven), '--out', str(tmp_path / 'a'), '--known-distance',
+              '0', '1', '-2'], 'positive'),
+            (['estimate-poses', str(driven), '--out', str(tmp_path / 'a'), '--known-distance',
+              '0', 'x', '1'], 'two image indices')):
         assert vbn_main(argv) != 0
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0] and 'Traceback' not in err[0]
@@ -118,7 +144,7 @@ def test_bench_estimate_table_and_summary(tmp_path, capsys) -> None:
     rows = json.loads((out / 'summary.json').read_text())
     assert len(rows) == 1 and rows[0]['drift'] == 2.0 and 'localize' not in rows[0]
     assert code == (0 if rows[0]['pass'] else 1)
-    assert '| room | 2 | 0 |' in printed and 'targets:' in printed
+    assert '| room | panoramic | 2 | 0 |' in printed and 'targets:' in printed
     assert rows[0]['result']['position_median'] < rows[0]['odometry']['position_median']
     assert vbn_main(['bench-estimate', '--out', str(out), '--drifts', 'x']) != 0
     assert 'numbers' in capsys.readouterr().err

@@ -14,7 +14,9 @@ time of each step and, when the bag has ``/ground_truth/pose``, the accuracy of 
 odometry, of the thesis's own result (directions alone, scaled by the odometry's path),
 of the joint solve with the odometry, of the unrefined result and of the result after the
 bundle adjustment (:mod:`visibility_builder.estimation.refinement`), each after an SE(2)
-alignment.
+alignment. ``--known-distance I J METRES`` takes the scale from a distance measured
+between two images' places instead of the odometry's path (a wheel's scale error is
+invisible to the images).
 """
 from __future__ import annotations
 
@@ -46,6 +48,10 @@ def register(subparsers: Any) -> None:
                         help='second pass: pair places this close, metres (0.75)')
     parser.add_argument('--workers', type=int, default=None,
                         help='processes for SIFT (default: every core)')
+    parser.add_argument('--known-distance', nargs=3, metavar=('I', 'J', 'METRES'),
+                        default=None,
+                        help='scale from a measured distance between images I and J (0-based, '
+                             "bag order) instead of the odometry's path length")
     parser.add_argument('--json', metavar='FILE', default=None,
                         help='write the counts, times and figures as JSON into FILE')
     parser.add_argument('--quiet', action='store_true', help='no progress line')
@@ -61,8 +67,12 @@ def run(args: argparse.Namespace) -> int:
     from vbn_common.errors import VbnCommonError
     from vbn_common.exploration import ReadConfig, read_exploration
     from visibility_builder.errors import VisibilityBuilderError
-    from visibility_builder.estimation.accuracy import align_se2, pose_errors
-    from visibility_builder.estimation.pipeline import EstimationSettings, estimate_poses
+    from visibility_builder.estimation.accuracy import align_se2, pose_errors, similarity_scale
+    from visibility_builder.estimation.pipeline import (
+        EstimationSettings,
+        estimate_poses,
+        scaled_to_distance,
+    )
     from visibility_builder.estimation.pose_bag import write_estimated_bag
 
     out = Path(args.out)
@@ -84,6 +94,23 @@ def run(args: argparse.Namespace) -> int:
         truth = None
     if args.frame == 'truth' and truth is None:
         raise VisibilityBuilderError(f'--frame truth: {args.bag} has no /ground_truth/pose')
+    known = None
+    if args.known_distance is not None:
+        try:
+            known = (int(args.known_distance[0]), int(args.known_distance[1]),
+                     float(args.known_distance[2]))
+        except ValueError:
+            raise VisibilityBuilderError('--known-distance takes two image indices and a '
+                                         f'distance in metres, got {args.known_distance}'
+                                         ) from None
+        count = len(exploration.frames)
+        if not (0 <= known[0] < count and 0 <= known[1] < count) or known[0] == known[1]:
+            raise VisibilityBuilderError(f'--known-distance: {args.bag} has {count} images; '
+                                         f'two different ones are needed, got {known[0]} '
+                                         f'and {known[1]}')
+        if not (np.isfinite(known[2]) and known[2] > 0):
+            raise VisibilityBuilderError(f'--known-distance: the distance must be positive, '
+                                         f'got {known[2]}')
     settings = EstimationSettings(workers=args.workers)
     if args.window is not None:
         settings = replace(settings, window=args.window)
@@ -93,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
     result = estimate_poses(exploration, settings, progress)
     if progress is not None:
         print(file=sys.stderr)
+    if known is not None:
+        result = scaled_to_distance(result, *known)
     poses = result.base_poses
     if args.frame == 'truth':
         poses = align_se2(poses, truth)
@@ -128,6 +157,9 @@ def run(args: argparse.Namespace) -> int:
             errors = pose_errors(p, truth)
             print(f'  {name:<10} against /ground_truth/pose (SE(2) aligned): {errors.line()}')
             figures[name] = errors.__dict__
+        figures['result_scale'] = similarity_scale(result.base_poses, truth)
+        print(f"  scale: the truth is {figures['result_scale']:.5f} times the result's size "
+              '(a similarity alignment)')
     print(f'wrote {out}: {written} /estimated/pose of {n} images (frame map = '
           f'{"the truth, aligned" if args.frame == "truth" else "odometry at the first image"})')
     if args.json:
