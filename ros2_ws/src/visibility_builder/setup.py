@@ -30,6 +30,7 @@ setup(
             'bench-build = visibility_builder.cli.bench_build:register',
             'estimate-poses = visibility_builder.cli.estimate_poses:register',
             'bench-estimate = visibility_builder.cli.bench_estimate:register',
+            'bench-strecha = visibility_builder.cli.bench_strecha:register',
         ],
     },
 )

@@ -29,7 +29,8 @@ def estimated(driven, tmp_path_factory):
     out = tmp_path_factory.mktemp('estimated') / 'room_estimated'
     figures = out.parent / 'figures.json'
     assert vbn_main(['estimate-poses', str(driven), '--out', str(out), '--radius', '1.2',
-                     '--json', str(figures), '--quiet']) == 0
+                     '--json', str(figures), '--quiet', '--report',
+                     str(out.parent / 'report')]) == 0
     return out, json.loads(figures.read_text())
 
 
@@ -57,6 +58,14 @@ def test_poses_from_images_and_odometry_beat_the_odometry(driven, estimated) -> 
     # frame: map is the odometry's at the first image
     odom = read_exploration(driven, ReadConfig(pose_source='tf', map_frame='odom'))
     assert mine.base_poses()[0] == pytest.approx(odom.base_poses()[0], abs=1e-6)
+
+
+def test_the_report_draws_the_view_graph_and_the_trajectories(estimated) -> None:
+    out, figures = estimated
+    report = out.parent / 'report'
+    for name in ('view_graph.png', 'trajectories.png'):
+        assert (report / name).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert json.loads((report / 'summary.json').read_text())['images'] == figures['images']
 
 
 def test_a_known_distance_sets_the_scale(driven, estimated, tmp_path) -> None:

@@ -16,7 +16,8 @@ of the joint solve with the odometry, of the unrefined result and of the result 
 bundle adjustment (:mod:`visibility_builder.estimation.refinement`), each after an SE(2)
 alignment. ``--known-distance I J METRES`` takes the scale from a distance measured
 between two images' places instead of the odometry's path (a wheel's scale error is
-invisible to the images).
+invisible to the images). ``--report DIR`` draws the view graph and the odometry's
+trajectory against the estimate (:mod:`visibility_builder.estimation.report`).
 """
 from __future__ import annotations
 
@@ -52,6 +53,8 @@ def register(subparsers: Any) -> None:
                         default=None,
                         help='scale from a measured distance between images I and J (0-based, '
                              "bag order) instead of the odometry's path length")
+    parser.add_argument('--report', metavar='DIR', default=None,
+                        help='write view_graph.png, trajectories.png and summary.json here')
     parser.add_argument('--json', metavar='FILE', default=None,
                         help='write the counts, times and figures as JSON into FILE')
     parser.add_argument('--quiet', action='store_true', help='no progress line')
@@ -164,6 +167,15 @@ def run(args: argparse.Namespace) -> int:
           f'{"the truth, aligned" if args.frame == "truth" else "odometry at the first image"})')
     if args.json:
         Path(args.json).write_text(json.dumps(figures, indent=2, default=float))
+    if args.report:
+        from visibility_builder.estimation.report import write_estimation_report
+
+        aligned = None
+        if truth is not None:
+            # The truth moved onto the estimate (the inverse of aligning the estimate).
+            aligned = align_se2(truth, result.base_poses)
+        write_estimation_report(Path(args.report), result, figures, aligned)
+        print(f'report: {args.report}/view_graph.png, trajectories.png, summary.json')
     return 0
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from vbn_common.geometry.frames import wrap_angle
 
-__all__ = ['PoseErrors', 'align_se2', 'pose_errors', 'similarity_scale']
+__all__ = ['PoseErrors', 'align_se2', 'centre_errors_sim3', 'pose_errors', 'similarity_scale']
 
 
 @dataclass(frozen=True)
@@ -88,3 +88,26 @@ def similarity_scale(estimate: np.ndarray, truth: np.ndarray) -> float:
     u, singular, vt = np.linalg.svd(a.T @ b)
     d = np.sign(np.linalg.det(vt.T @ u.T))
     return float((singular[0] + d * singular[1]) / np.sum(a * a))
+
+
+def centre_errors_sim3(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """Distances of ``estimate``'s 3-D points from ``truth``'s after the best similarity.
+
+    Umeyama's rotation, translation and scale over the rows finite in both; the other
+    rows NaN. For structure from motion without a known length (its scale is free).
+    """
+    estimate = np.asarray(estimate, float)
+    truth = np.asarray(truth, float)
+    ok = np.isfinite(estimate).all(axis=1) & np.isfinite(truth).all(axis=1)
+    out = np.full(len(estimate), np.nan)
+    if ok.sum() < 3:
+        return out
+    a, b = estimate[ok], truth[ok]
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    u, singular, vt = np.linalg.svd((a - ma).T @ (b - mb))
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    r = vt.T @ d @ u.T
+    scale = float(np.sum(singular * np.diag(d)) / np.sum((a - ma) ** 2))
+    moved = scale * (estimate[ok] - ma) @ r.T + mb
+    out[ok] = np.linalg.norm(moved - b, axis=1)
+    return out

@@ -40,7 +40,8 @@ from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from vbn_common.geometry.rays import intersect_rays
 from visibility_builder.errors import VisibilityBuilderError
 
-__all__ = ['RefinementResult', 'RefinementSettings', 'refine_poses', 'tracks_from_pairs']
+__all__ = ['GeneralRefinement', 'RefinementResult', 'RefinementSettings', 'refine_general',
+           'refine_poses', 'tracks_from_pairs']
 
 #: Virtual sensors: one per this many degrees of azimuth.
 SECTOR_DEG = 45.0
@@ -299,3 +300,136 @@ def _pixel_errors(result: object, observations: np.ndarray, rays: np.ndarray,
     cos = np.einsum('ij,ij->i', local, rays)
     out = np.arccos(np.clip(cos, -1.0, 1.0)) * focal
     return np.where(np.isfinite(out), out, np.inf)
+
+
+@dataclass(frozen=True)
+class GeneralRefinement:
+    """Refined six-degree-of-freedom camera poses (:func:`refine_general`).
+
+    Attributes:
+        rotations: ``(n, 3, 3)`` each camera's planar frame into the world.
+        centres: ``(n, 3)`` camera centres.
+        observations: Observations in the final solve.
+        rms_px: Their RMS reprojection error, pixels.
+    """
+
+    rotations: np.ndarray
+    centres: np.ndarray
+    observations: int
+    rms_px: float
+
+
+def refine_general(rotations: np.ndarray, centres: np.ndarray, observations: np.ndarray,
+                   uv: np.ndarray, camera: CameraModel, solved: np.ndarray,
+                   noise_px: float = 1.0, huber_px: float = 2.0, outlier_sigmas: float = 3.0,
+                   max_iterations: int = 50) -> GeneralRefinement:
+    """Bundle-adjust general camera poses (a hand-held camera) and their tracks' points.
+
+    The cameras' own pixels are the measurements (a pinhole camera's
+    ``GenericProjectionFactorCal3_S2`` with the optical frame on the body as
+    ``body_P_sensor``). The first solved camera is held; a weak prior on the position of
+    the camera farthest from it (a tenth of their distance) holds the scale, which
+    nothing else fixes. As in :func:`refine_poses`, the first solve's residuals measure
+    the keypoints' noise and the second removes observations beyond ``outlier_sigmas``
+    of it.
+
+    Args:
+        rotations: ``(n, 3, 3)`` initial planar-frame-into-world rotations.
+        centres: ``(n, 3)`` initial camera centres.
+        observations: ``(m, 2)`` ``(track, image)``.
+        uv: ``(m, 2)`` the observed pixels.
+        camera: A pinhole camera (no distortion).
+        solved: ``(n,)`` bool, the cameras to refine (the others are left out).
+        noise_px: Keypoint noise of the first solve, pixels.
+        huber_px: Its Huber threshold.
+        outlier_sigmas: Observations beyond this many measured sigmas are removed.
+        max_iterations: Levenberg-Marquardt iterations per solve.
+
+    Returns:
+        The refined poses (the unsolved cameras as they came).
+
+    Raises:
+        VisibilityBuilderError: not a pinhole camera, or no track seen twice.
+    """
+    import gtsam
+
+    if camera.kind != 'pinhole':
+        raise VisibilityBuilderError(f'refine_general needs a pinhole camera, got {camera.kind}')
+    rotations = np.asarray(rotations, float)
+    centres = np.asarray(centres, float)
+    observations = np.asarray(observations, np.int64).reshape(-1, 2)
+    uv = np.asarray(uv, float).reshape(-1, 2)
+    solved = np.asarray(solved, bool)
+    use = solved[observations[:, 1]]
+    n_tracks = int(observations[:, 0].max()) + 1 if len(observations) else 0
+    img = observations[:, 1]
+    planar_rays = camera.unproject(uv) @ BASE_TO_CAMERA_ROTATION.T
+    world = np.einsum('mij,mj->mi', rotations[img], planar_rays)
+    points = intersect_rays(world, centres[img], observations[:, 0], n_tracks,
+                            np.bincount(observations[use, 0], minlength=n_tracks) >= 2)
+    depth = np.einsum('ij,ij->i', points[observations[:, 0]] - centres[img], world)
+    use &= np.isfinite(depth) & (depth > 0)
+    good = np.bincount(observations[use, 0], minlength=n_tracks) >= 2
+    use &= good[observations[:, 0]]
+    if not use.any():
+        raise VisibilityBuilderError('no track seen twice to refine the poses')
+    X = gtsam.symbol_shorthand.X
+    L = gtsam.symbol_shorthand.L
+    calibration = gtsam.Cal3_S2(camera.fx, camera.fy, 0.0, camera.cx, camera.cy)
+    sensor = gtsam.Pose3(gtsam.Rot3(BASE_TO_CAMERA_ROTATION), np.zeros(3))
+    cams = np.flatnonzero(solved)
+    anchor = int(cams[0])
+    far = int(cams[np.argmax(np.linalg.norm(centres[cams] - centres[anchor], axis=1))])
+    spread = float(np.linalg.norm(centres[far] - centres[anchor]))
+
+    def pose3(i: int) -> object:
+        return gtsam.Pose3(gtsam.Rot3(rotations[i]), centres[i])
+
+    def solve(active: np.ndarray, sigma: float, huber: float) -> object:
+        graph = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(
+            huber / sigma), gtsam.noiseModel.Isotropic.Sigma(2, sigma))
+        for i in cams:
+            values.insert(X(int(i)), pose3(int(i)))
+        for t in np.flatnonzero(good):
+            values.insert(L(int(t)), points[t])
+        for k in np.flatnonzero(active):
+            graph.add(gtsam.GenericProjectionFactorCal3_S2(
+                uv[k], noise, X(int(img[k])), L(int(observations[k, 0])), calibration,
+                sensor))
+        graph.add(gtsam.PriorFactorPose3(X(anchor), pose3(anchor),
+                                         gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        if far != anchor:
+            graph.add(gtsam.PriorFactorPose3(X(far), pose3(far), gtsam.noiseModel.Diagonal.Sigmas(
+                np.array([1e3, 1e3, 1e3] + [0.1 * spread] * 3))))
+        params = gtsam.LevenbergMarquardtParams()
+        params.setMaxIterations(max_iterations)
+        return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+
+    def errors(result: object) -> np.ndarray:
+        out = np.full(len(observations), np.inf)
+        for k in np.flatnonzero(use):
+            pose = result.atPose3(X(int(img[k]))).compose(sensor)
+            try:
+                projected = gtsam.PinholeCameraCal3_S2(pose, calibration).project(
+                    result.atPoint3(L(int(observations[k, 0]))))
+            except RuntimeError:                       # behind the camera
+                continue
+            out[k] = float(np.linalg.norm(projected - uv[k]))
+        return out
+
+    result = solve(use, noise_px, huber_px)
+    first = errors(result)
+    measured = float(np.median(first[use])) / 1.177
+    sigma = min(max(measured, 0.1), noise_px)
+    keep = use & (first <= outlier_sigmas * sigma)
+    result = solve(keep, sigma, 2.0 * sigma)
+    final = errors(result)
+    out_r, out_c = rotations.copy(), centres.copy()
+    for i in cams:
+        pose = result.atPose3(X(int(i)))
+        out_r[i] = pose.rotation().matrix()
+        out_c[i] = pose.translation()
+    rms = float(np.sqrt(np.mean(final[keep] ** 2))) if keep.any() else math.nan
+    return GeneralRefinement(out_r, out_c, int(keep.sum()), rms)
