@@ -217,9 +217,12 @@ def run(args: argparse.Namespace) -> int:
             lines.append(f"| {scene} | ratio to the better pycolmap mapper | | "
                          f"{row['median_ratio']:.2f} x | {row['time_ratio']:.2f} x |")
             passed &= row['pass']
+        else:
+            passed = False          # nothing to judge against
         summary.append(row)
     print('\n'.join(lines))
     print('targets: every image posed, median centre error within 2 x and time within 2 x of '
-          "the better pycolmap mapper's: " + ('PASS' if passed else 'FAIL'))
+          "the better pycolmap mapper's: " + ('PASS' if passed else 'FAIL')
+          + ('' if not args.no_colmap else ' (--no-colmap: not judged)'))
     write_text_atomic(out / 'summary.json', json.dumps(summary, indent=2, default=float))
     return 0 if passed else 1
