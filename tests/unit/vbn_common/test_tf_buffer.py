@@ -65,3 +65,21 @@ def test_rotation_angles_between_rotations() -> None:
     assert rotation_angles_deg(np.eye(3), many) == pytest.approx([0.0, 30.0, 90.0, 180.0])
     assert float(rotation_angles_deg(rot_z(10.0), rot_z(45.0))) == pytest.approx(35.0)
     assert np.isnan(rotation_angles_deg(np.eye(3), np.full((3, 3), np.nan)))
+
+
+def test_stamps_that_go_back_are_refused_jitter_is_not():
+    """An odometry reset (stamps back by 2 s) would interleave two histories once sorted."""
+    from vbn_common.errors import VbnCommonError
+
+    second = 1_000_000_000
+    jitter = TfBuffer()
+    for stamp in (0, 2 * second, int(1.9 * second), 3 * second):     # 0.1 s out of order
+        jitter.add(_tf('odom', 'base_link', (stamp / second, 0.0, 0.0)), stamp, static=False)
+    _, translation, found = jitter.lookup('odom', 'base_link', np.array([int(1.9 * second)]),
+                                          10)
+    assert found.all() and translation[0, 0] == pytest.approx(1.9)
+    reset = TfBuffer()
+    for stamp in (0, second, 2 * second, int(0.5 * second), second):
+        reset.add(_tf('odom', 'base_link', (0.0, 0.0, 0.0)), stamp, static=False)
+    with pytest.raises(VbnCommonError, match=r'odom -> base_link: stamps go back by 1\.50 s'):
+        reset.lookup('odom', 'base_link', np.array([0]), 10)

@@ -96,12 +96,30 @@ def test_build_reads_the_estimated_poses(estimated, tmp_path) -> None:
     assert db.is_file()
 
 
+def _rewound(driven, path):
+    """The driven bag with its first half of /tf recorded after the second (a reset)."""
+    from vbn_common.bags import BagWriter
+
+    with open_bag(driven) as bag, BagWriter(path) as writer:
+        keep = {n: writer.add_topic(n, i.msgtype, i.qos_profiles or None)
+                for n, i in bag.topics.items()}
+        rows = list(bag.messages(topics=list(keep)))
+        middle = rows[len(rows) // 2][2]
+        late = [(t, s + 10 ** 12 if t == '/tf' and s < middle else s, raw)
+                for t, _, s, raw in rows]
+        for topic, stamp, raw in sorted(late, key=lambda r: r[1]):
+            writer.write_raw(keep[topic], stamp, raw)
+    return path
+
+
 def test_bad_input_is_one_line_and_writes_nothing(driven, tmp_path, capsys) -> None:
     plain = tmp_path / 'plain'
     write_bag(resolve_scene('room'), BagSpec(kind='exploration', width=128, height=32,
                                              spacing=1.5), plain)
     for argv, message in (
-            (['estimate-poses', str(plain), '--out', str(tmp_path / 'a')], 'no odometry'),
+            (['estimate-poses', str(plain), '--out', str(tmp_path / 'a')], 'usable odometry'),
+            (['estimate-poses', str(_rewound(driven, tmp_path / 'rewound')), '--out',
+              str(tmp_path / 'a')], 'stamps go back'),
             (['estimate-poses', str(driven), '--out', str(driven)], 'exists already'),
             (['estimate-poses', str(tmp_path / 'missing'), '--out', str(tmp_path / 'b')],
              'missing'),

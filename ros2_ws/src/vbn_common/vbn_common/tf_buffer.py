@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from vbn_common.errors import VbnCommonError
+
 __all__ = ['TfBuffer', 'TfLink', 'compose_transforms', 'nearest_stamps', 'quaternion_matrices',
            'rotation_angles_deg']
 
@@ -150,6 +152,11 @@ class TfBuffer:
         """Return ``(R (n,3,3), t (n,3), found (n,))`` of ``child`` in ``parent``, or None.
 
         ``found`` is False where a dynamic link has no sample within the tolerance.
+
+        Raises:
+            VbnCommonError: a dynamic link's stamps go back in time by more than
+                :data:`MAX_BACK_NS` in the order they were recorded (an odometry reset, a
+                rewound clock): samples sorted by stamp would interleave two histories.
         """
         frames = self.chain(parent, child)
         if frames is None:
@@ -166,6 +173,7 @@ class TfBuffer:
                 link_translation = np.asarray(link.translations, dtype=float)[index]
             else:
                 link_stamps = np.asarray(link.stamps, dtype=np.int64)
+                _refuse_jumps_back(link.parent, frame, link_stamps)
                 order = np.argsort(link_stamps, kind='stable')
                 index, gap = nearest_stamps(link_stamps[order], stamps)
                 index = order[index]
@@ -175,3 +183,22 @@ class TfBuffer:
             rotation, translation = compose_transforms((link_rotation, link_translation),
                                              (rotation, translation))
         return rotation, translation, found
+
+
+#: Out-of-order /tf samples within this are delivery jitter; further back is a new history.
+MAX_BACK_NS = 500_000_000
+
+
+def _refuse_jumps_back(parent: str, child: str, stamps: np.ndarray) -> None:
+    """Raise when ``stamps`` (in recorded order) go back by more than :data:`MAX_BACK_NS`."""
+    if len(stamps) < 2:
+        return
+    newest = np.maximum.accumulate(stamps)
+    back = newest[:-1] - stamps[1:]
+    jumps = np.flatnonzero(back > MAX_BACK_NS)
+    if len(jumps):
+        k = int(jumps[0]) + 1
+        raise VbnCommonError(
+            f'/tf {parent} -> {child}: stamps go back by {back[k - 1] / 1e9:.2f} s at sample '
+            f'{k} of {len(stamps)} ({len(jumps)} time(s) in all): the odometry was reset or '
+            'the clock rewound; split the bag at the jump')

@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
         exploration = read_exploration(args.bag, ReadConfig(pose_source='tf',
                                                             map_frame='odom'))
     except VbnCommonError as error:
-        raise VisibilityBuilderError(f'{args.bag}: no odometry to estimate from '
+        raise VisibilityBuilderError(f'{args.bag}: no usable odometry to estimate from '
                                      f'(odom -> base_link on /tf): {error}') from None
     truth = None
     try:
