@@ -149,6 +149,11 @@ def test_build_estimates_the_poses_of_an_odometry_only_bag(driven, tmp_path, cap
     db = tmp_path / 'robot.db'
     assert vbn_main(['build', str(stripped), '--db', str(db), '--quiet']) == 0
     assert db.is_file()
+    # the database is a valid decomposition of its world (vbn validate)
+    world, decomposition = tmp_path / 'world.json', tmp_path / 'decomposition.json'
+    assert vbn_main(['db-export', str(db), '--world', str(world), '--decomposition',
+                     str(decomposition)]) == 0
+    assert vbn_main(['validate', str(world), str(decomposition)]) == 0
     # no odometry either: one line, nothing written
     bare = tmp_path / 'bare'
     with open_bag(driven) as bag, BagWriter(bare) as writer:
