@@ -140,6 +140,8 @@ def run(args: argparse.Namespace) -> int:
           'for directions')
     if result.refused:
         print('  refused: ' + ', '.join(f'{v} {k}' for k, v in sorted(result.refused.items())))
+    for line in result.warnings:
+        print(f'warning: {line}')
     if len(result.components) > 1:
         print(f'warning: the pairs join the places into {len(result.components)} pieces '
               f'({result.components[:5]}...): the largest is estimated, the others rest on '
@@ -152,7 +154,8 @@ def run(args: argparse.Namespace) -> int:
     figures: dict[str, Any] = {'images': n, 'estimated': estimated, 'written': written,
                                'pairs': len(result.pairs), 'tried': result.tried,
                                'refused': result.refused, 'times': result.times,
-                               'components': result.components[:10]}
+                               'components': result.components[:10],
+                               'warnings': result.warnings}
     if truth is not None:
         for name, p in (('odometry', result.odometry_poses), ('thesis', result.thesis_poses),
                         ('joint', result.joint_poses), ('unrefined', result.unrefined_poses),

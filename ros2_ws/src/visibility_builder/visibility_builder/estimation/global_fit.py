@@ -52,7 +52,11 @@ from visibility_builder.estimation.view_pairs import (
 if TYPE_CHECKING:
     from visibility_builder.estimation.pipeline import EstimationSettings
 
-__all__ = ['fit_views']
+__all__ = ['TILT_STD', 'fit_views']
+
+#: How far a shaking camera's views tilt from level, radians (the odometry's turns and the
+#: bundle adjustment's planar priors allow this much pitch and roll).
+TILT_STD = 0.03
 
 _LOG = logging.getLogger(__name__)
 
@@ -81,7 +85,22 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     std = np.array([p.rotation_std for p in pairs])
     kept = np.ones(len(pairs), bool)
     guess = None
-    if all(p.method != 'general_essential' for p in pairs):
+    general = any(p.method == 'general_essential' for p in pairs)
+    if general:
+        # A shaking camera: the odometry's turn says nothing of the views' tilts.
+        odo_std = np.maximum(odo_std, TILT_STD)
+        tree = fit_rotations(n, np.concatenate([ij, odo_ij]), np.concatenate([rel, odo_rel]),
+                             np.concatenate([w, 1.0 / odo_std ** 2]), anchor=0, iterations=0)
+        if len(pairs):
+            # Judged against the heaviest tree first (see unordered.py).
+            q = tree.quaternions
+            err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
+            miss = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
+            miss = np.where(np.isfinite(miss), miss, np.inf)
+            kept = miss <= np.maximum(4.0 * std, max(
+                4.0 * 1.4826 * float(np.median(miss)),
+                math.radians(settings.max_rotation_error_deg)))
+    else:
         # A planar robot: the robust (L1) angles start the fit, their far misses dropped.
         start = np.concatenate([[0.0], np.cumsum(quat_yaw(odo_rel))])
         angles = planar_l1_angles(n, np.concatenate([ij, odo_ij]),
@@ -112,11 +131,16 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
         if not bad.any():
             break
         kept &= ~bad
-    # The fit's world is camera 0's planar frame; map -> camera 0 is its odometry heading:
-    # q_i then rotates map into camera i's frame, and yaw_i = -angle about z.
-    q = quat_mul(rot.quaternions, quat_from_yaw(-odom_cam[0, 2]))
-    yaw = -quat_yaw(q)
-    to_world = np.transpose(quat_to_matrix(q), (0, 2, 1))   # camera i's frame into map
+    # The fit's world is camera 0's planar frame. A shaking camera's first view is tilted:
+    # the world is levelled so that the views' mean up is vertical. Then map -> camera 0
+    # is its odometry heading, and yaw_i the heading of camera i's forward axis.
+    to_world = np.transpose(quat_to_matrix(rot.quaternions), (0, 2, 1))
+    if general:
+        to_world = _levelling(to_world[:, :, 2]) @ to_world
+    yaw = np.arctan2(to_world[:, 1, 0], to_world[:, 0, 0])
+    turn_map = float(odom_cam[0, 2] - yaw[0])
+    to_world = quat_to_matrix(quat_from_yaw(turn_map)) @ to_world
+    yaw = wrap_angle(yaw + turn_map)
     # -- positions (6.1.4) over stations -----------------------------------------------------
     has_dir = np.array([p.has_direction for p in pairs], bool) & kept
     idx = np.flatnonzero(has_dir & (station[ij[:, 0]] != station[ij[:, 1]])) \
@@ -124,8 +148,9 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     s_ij = station[ij[idx]] if len(idx) else np.zeros((0, 2), np.int64)
     dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx]).reshape(-1, 3)
     dstd = np.array([pairs[k].direction_std for k in idx])
-    planar = all(pairs[k].method != 'general_essential' for k in idx)
-    d = 2 if planar else 3
+    # The robot is on a floor whatever its camera did: positions in the plane.
+    planar = not general
+    d = 2
     if planar and len(idx) and refit is not None:
         # Each bearing refitted under the fitted turn (view_pairs.bearings_given_turns).
         chosen = [pairs[k] for k in idx]
@@ -204,3 +229,16 @@ def _components(n: int, edges: np.ndarray) -> list[int]:
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     count, labels = connected_components(graph, directed=False)
     return sorted(np.bincount(labels, minlength=count).tolist(), reverse=True)
+
+
+def _levelling(ups: np.ndarray) -> np.ndarray:
+    """Return the rotation that turns the mean of the ``(n, 3)`` unit ``ups`` to ``+z``."""
+    mean = np.nanmean(ups, axis=0)
+    mean /= np.linalg.norm(mean)
+    axis = np.cross(mean, [0.0, 0.0, 1.0])
+    sine, cosine = float(np.linalg.norm(axis)), float(mean[2])
+    if sine < 1e-12:
+        return np.eye(3)
+    k = axis / sine
+    skew = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + sine * skew + (1.0 - cosine) * skew @ skew

@@ -65,6 +65,9 @@ class RefinementSettings:
             noise), an observation of a wrong match 1 to 3 px off stayed and turned the
             room's headings: 0.017 deg median against 0.009 deg this way.
         planar: Hold heights, rolls and pitches at zero (a robot on a floor).
+        tilt_std: With ``planar``, the rolls and pitches are held only this loosely
+            (radians; a shaking camera), and the odometry's factors leave them as free;
+            None holds them at zero.
         max_iterations: Levenberg-Marquardt iterations per solve.
     """
 
@@ -77,6 +80,7 @@ class RefinementSettings:
     huber_sigmas: float = 2.0
     outlier_sigmas: float = 3.0
     planar: bool = True
+    tilt_std: float | None = None
     max_iterations: int = 50
 
 
@@ -239,15 +243,18 @@ def refine_poses(camera_poses: np.ndarray, observations: np.ndarray, rays: np.nd
                 calibration, sensors[sector]))
         pairs, relative, sigmas = odometry
         for (a, b), rel, sig in zip(pairs, relative, sigmas, strict=True):
+            tilt = 1e-3 if settings.tilt_std is None else 2.0 * settings.tilt_std
             model = gtsam.noiseModel.Diagonal.Sigmas(
-                np.array([1e-3, 1e-3, sig[2], sig[0], sig[1], 1e-3]))
+                np.array([tilt, tilt, sig[2], sig[0], sig[1], 1e-3]))
             graph.add(gtsam.BetweenFactorPose3(X(int(a)), X(int(b)), pose3(rel), model))
         if settings.planar:
-            flat = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-5, 1e-5, 1e3, 1e3, 1e3, 1e-5]))
+            tilt = 1e-5 if settings.tilt_std is None else settings.tilt_std
+            flat = gtsam.noiseModel.Diagonal.Sigmas(np.array([tilt, tilt, 1e3, 1e3, 1e3, 1e-5]))
             for i in range(n):
                 graph.add(gtsam.PriorFactorPose3(X(i), pose3(poses[i]), flat))
-        graph.add(gtsam.PriorFactorPose3(X(0), pose3(poses[0]),
-                                         gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+        tilt0 = 1e-6 if settings.tilt_std is None else settings.tilt_std
+        graph.add(gtsam.PriorFactorPose3(X(0), pose3(poses[0]), gtsam.noiseModel.Diagonal.Sigmas(
+            np.array([tilt0, tilt0, 1e-6, 1e-6, 1e-6, 1e-6]))))
         return graph, values
 
     def solve(active: np.ndarray, noise_px: float = settings.noise_px,
