@@ -80,3 +80,16 @@ def test_no_overlap_is_one_clear_error() -> None:
         estimate_unordered(strangers, CAMERA)
     with pytest.raises(VisibilityBuilderError, match='at least two'):
         estimate_unordered(features[:1], CAMERA)
+
+
+def test_a_stray_first_photograph_leaves_the_others_posed() -> None:
+    """Image 0 shares nothing with the rest: the largest group is estimated without it."""
+    features, centres = _photographs(0.0, np.random.default_rng(5))
+    rng = np.random.default_rng(6)
+    stray = features[0]
+    features[0] = ImageFeatures(stray.keypoints, stray.sizes, stray.angles, stray.responses,
+                                rng.integers(0, 256, stray.descriptors.shape).astype(np.uint8))
+    estimate = estimate_unordered(features, CAMERA)
+    assert np.isnan(estimate.centres[0]).all()
+    errors = centre_errors_sim3(estimate.centres, centres)
+    assert np.isfinite(errors[1:]).all() and errors[1:].max() < 1e-4

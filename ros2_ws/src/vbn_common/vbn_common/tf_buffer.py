@@ -193,12 +193,11 @@ def _refuse_jumps_back(parent: str, child: str, stamps: np.ndarray) -> None:
     """Raise when ``stamps`` (in recorded order) go back by more than :data:`MAX_BACK_NS`."""
     if len(stamps) < 2:
         return
-    newest = np.maximum.accumulate(stamps)
-    back = newest[:-1] - stamps[1:]
+    back = stamps[:-1] - stamps[1:]              # a jump back from one sample to the next
     jumps = np.flatnonzero(back > MAX_BACK_NS)
     if len(jumps):
         k = int(jumps[0]) + 1
         raise VbnCommonError(
             f'/tf {parent} -> {child}: stamps go back by {back[k - 1] / 1e9:.2f} s at sample '
-            f'{k} of {len(stamps)} ({len(jumps)} time(s) in all): the odometry was reset or '
-            'the clock rewound; split the bag at the jump')
+            f'{k} of {len(stamps)} ({len(jumps)} jump(s) back in all): the odometry was reset '
+            'or the clock rewound; split the bag at the jump')

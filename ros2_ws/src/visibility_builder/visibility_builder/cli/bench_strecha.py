@@ -134,7 +134,8 @@ def _colmap(image_dir: Path, names: list[str], camera: Any, work: Path) -> dict[
     t = time.perf_counter()
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = 'PINHOLE'
-    reader.camera_params = f'{camera.fx},{camera.fy},{camera.cx},{camera.cy}'
+    # COLMAP puts the first pixel's centre at (0.5, 0.5), OpenCV (and this project) at 0.
+    reader.camera_params = f'{camera.fx},{camera.fy},{camera.cx + 0.5},{camera.cy + 0.5}'
     pycolmap.extract_features(database, image_dir, image_names=names,
                               camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
                               device=pycolmap.Device.cpu)

@@ -14,8 +14,8 @@
 - **Positions** (6.1.4, :mod:`.positions`) over stations: the thesis's directions alone
   (null vector, scaled by the odometry's path length); the linear joint system of
   directions and odometry displacements (which reaches views the directions leave
-  free); and, for a planar robot, the robust non-linear fit of the bearings and the
-  odometry seeded by one of them
+  free); and the robust non-linear fit of the bearings and the odometry seeded by one
+  of them (in the plane: the robot is on a floor, whether or not its camera tilts)
   (:func:`~.positions.refine_planar_positions`: the linear fits' shrinkage removed).
   The last is the estimate (``camera``), the first is reported beside it (``thesis``).
 """
@@ -122,6 +122,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
             q = rot.quaternions
             err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
             error = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
+            error = np.where(np.isfinite(error), error, np.inf)
         # Outliers: beyond 4 of their own standard deviations and 4 robust standard
         # deviations of the kept pairs' errors (a wrong mode of a solver can be tens of
         # times off its claimed precision and yet within a fixed threshold).
@@ -149,9 +150,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx]).reshape(-1, 3)
     dstd = np.array([pairs[k].direction_std for k in idx])
     # The robot is on a floor whatever its camera did: positions in the plane.
-    planar = not general
-    d = 2
-    if planar and len(idx) and refit is not None:
+    if not general and len(idx) and refit is not None:
         # Each bearing refitted under the fitted turn (view_pairs.bearings_given_turns).
         chosen = [pairs[k] for k in idx]
         features, camera, pair_settings = refit
@@ -160,7 +159,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
             pair_settings)
         heading = yaw[ij[idx, 0]] + bearing
         dirs = np.stack([np.cos(heading), np.sin(heading), np.zeros(len(idx))], axis=1)
-    dirs = dirs[:, :d]
+    dirs = dirs[:, :2]
     dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-12)
     n_st = int(station.max()) + 1
     first_of = np.array([np.flatnonzero(station == s)[0] for s in range(n_st)])
@@ -175,8 +174,6 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     turn_to_world = base_yaw_est[a_st] - st_odom[a_st, 2]
     c, s = np.cos(turn_to_world), np.sin(turn_to_world)
     disp = np.stack([c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]], 1)
-    if d == 3:
-        disp = np.concatenate([disp, np.zeros((len(disp), 1))], axis=1)
     o_std = settings.odometry_std_floor_m + settings.odometry_std_per_m * \
         np.linalg.norm(delta, axis=1)
     odometry = (np.stack([a_st, b_st], 1), disp, 1.0 / o_std ** 2)
@@ -186,7 +183,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     kept_direction = np.zeros(len(pairs), bool)
     kept_direction[idx[combined.kept]] = True
     # The thesis's system: directions alone, scaled by the odometry's path length.
-    thesis_pos = np.full((n_st, d), np.nan)
+    thesis_pos = np.full((n_st, 2), np.nan)
     if len(idx):
         try:
             alone = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, max_angle=max_angle)
@@ -198,7 +195,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
         except VisibilityBuilderError as error:
             _LOG.warning('positions from the directions alone: %s', error)
     joint_pos = combined.positions
-    if d == 2 and len(idx):
+    if len(idx):
         # The linear fits' bias removed: bearings and odometry, non-linear and robust.
         seed = thesis_pos if np.isfinite(thesis_pos).all() else combined.positions
         if np.isfinite(seed).all():
@@ -206,7 +203,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
                 seed, s_ij, np.arctan2(dirs[:, 1], dirs[:, 0]), dstd, odometry)
             kept_direction[:] = False
             kept_direction[idx[miss <= 3.0 * dstd]] = True
-    components = _components(n_st, s_ij[combined.kept] if len(idx) else s_ij)
+    components = _components(n_st, station[ij[kept_direction]] if len(idx) else s_ij)
     origin = odom_cam[0, :2]
 
     def place(positions: np.ndarray) -> np.ndarray:

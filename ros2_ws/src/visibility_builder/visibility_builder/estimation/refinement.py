@@ -66,8 +66,8 @@ class RefinementSettings:
             room's headings: 0.017 deg median against 0.009 deg this way.
         planar: Hold heights, rolls and pitches at zero (a robot on a floor).
         tilt_std: With ``planar``, the rolls and pitches are held only this loosely
-            (radians; a shaking camera), and the odometry's factors leave them as free;
-            None holds them at zero.
+            (radians; a shaking camera), and the odometry's factors hold their changes
+            from one image to the next at twice it; None holds them at zero.
         max_iterations: Levenberg-Marquardt iterations per solve.
     """
 
@@ -438,5 +438,6 @@ def refine_general(rotations: np.ndarray, centres: np.ndarray, observations: np.
         pose = result.atPose3(X(int(i)))
         out_r[i] = pose.rotation().matrix()
         out_c[i] = pose.translation()
-    rms = float(np.sqrt(np.mean(final[keep] ** 2))) if keep.any() else math.nan
+    seen = keep & np.isfinite(final)          # an observation behind its camera is not
+    rms = float(np.sqrt(np.mean(final[seen] ** 2))) if seen.any() else math.nan
     return GeneralRefinement(out_r, out_c, int(keep.sum()), rms)

@@ -174,7 +174,8 @@ def planar_l1_angles(n: int, pairs: np.ndarray, measured: np.ndarray, weights: n
         rounds: Unwrap-and-solve rounds.
 
     Returns:
-        ``(n,)`` angles; a view no pair reaches keeps its start.
+        ``(n,)`` angles; a view no pair reaches gets an arbitrary angle (every pair
+        joined: the pipeline's odometry links each view to the next).
 
     Raises:
         VisibilityBuilderError: mismatched lengths, bad weights, or the solver failing.

@@ -27,6 +27,8 @@ import math
 import time
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.camera import CameraModel
@@ -123,10 +125,15 @@ def estimate_unordered(features: list[ImageFeatures], camera: CameraModel,
     # The heaviest spanning tree's guess judges the pairs first: a least-squares fit
     # over every pair is pulled by the wrong ones, and judged against it the right pairs
     # of the views it pulled look wrong (the fountain's last two views lost every pair).
-    guess = fit_rotations(n, ij, rel, 1.0 / std ** 2, anchor=0, iterations=0)
-    for iteration in range(7):
+    # The anchor: a view of the largest group the pairs join (one stray photograph must
+    # not be the reference of the rest).
+    _, group = connected_components(coo_matrix((np.ones(len(ij)), (ij[:, 0], ij[:, 1])),
+                                               shape=(n, n)), directed=False)
+    anchor = int(np.flatnonzero(group == np.argmax(np.bincount(group)))[0])
+    guess = fit_rotations(n, ij, rel, 1.0 / std ** 2, anchor=anchor, iterations=0)
+    for iteration in range(8):
         if iteration:
-            fit = fit_rotations(n, ij[kept], rel[kept], 1.0 / std[kept] ** 2, anchor=0)
+            fit = fit_rotations(n, ij[kept], rel[kept], 1.0 / std[kept] ** 2, anchor=anchor)
         else:
             fit = guess
         q = fit.quaternions
@@ -136,17 +143,21 @@ def estimate_unordered(features: list[ImageFeatures], camera: CameraModel,
         spread = 4.0 * 1.4826 * float(np.median(error[kept]))
         bad = kept & (error > np.maximum(4.0 * std, max(
             spread, math.radians(max_rotation_error_deg))))
-        if not bad.any():
-            break
+        if not bad.any() and iteration:
+            break               # the least squares ran and dropped nothing more
         kept &= ~bad
     to_world = np.transpose(quat_to_matrix(q), (0, 2, 1))        # camera i into world
     times['rotations'] = time.perf_counter() - t
     t = time.perf_counter()
     use = kept & np.isfinite(q[ij[:, 0]]).all(axis=1) & np.isfinite(q[ij[:, 1]]).all(axis=1)
     idx = np.flatnonzero(use)
-    dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx])
+    if not len(idx):
+        raise VisibilityBuilderError('no pair of images kept a direction: the views cannot be '
+                                     'placed')
+    dirs = np.array([to_world[pairs[k].i] @ pairs[k].direction for k in idx]).reshape(-1, 3)
     dstd = np.array([pairs[k].direction_std for k in idx])
-    positions = fit_positions(n, ij[idx], dirs, 1.0 / np.maximum(dstd, 1e-4) ** 2, anchor=0)
+    positions = fit_positions(n, ij[idx], dirs, 1.0 / np.maximum(dstd, 1e-4) ** 2,
+                              anchor=anchor)
     kept_direction = np.zeros(len(pairs), bool)
     kept_direction[idx[positions.kept]] = True
     thesis = positions.positions
