@@ -189,3 +189,19 @@ def test_views_without_parallax_are_a_rotation_only_where_the_robot_stood_still(
     assert math.degrees(turn) == pytest.approx(20.0, abs=0.05)
     moved, why = measure_pair(0, 1, a, b, camera, PairSettings(), moved=True)
     assert moved is None and why.startswith('no parallax')
+
+
+def test_similarity_figures_by_hand() -> None:
+    """An estimate 0.2 % small and turned: scale 1.002 back, zero error after a similarity."""
+    from visibility_builder.estimation.accuracy import centre_errors_sim3, similarity_scale
+
+    truth = np.array([[0.0, 0.0, 0.0], [4.0, 0.0, 0.1], [4.0, 3.0, 0.0], [0.0, 3.0, -0.2]])
+    c, s = math.cos(0.7), math.sin(0.7)
+    turned = truth @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T
+    estimate = turned / 1.002 + [5.0, -2.0, 1.0]
+    assert similarity_scale(estimate, truth) == pytest.approx(1.002, abs=1e-9)
+    assert centre_errors_sim3(estimate, truth) == pytest.approx(np.zeros(4), abs=1e-9)
+    shifted = estimate.copy()
+    shifted[0, 0] += 0.01
+    assert np.nanmax(centre_errors_sim3(shifted, truth)) > 0.003
+    assert np.isnan(centre_errors_sim3(estimate[:2], truth[:2])).all()   # too few points
