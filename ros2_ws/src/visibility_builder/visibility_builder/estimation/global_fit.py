@@ -217,8 +217,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     # Positions are the cameras' (mount included): the first camera at its odometry pose.
     return {'camera': place(joint_pos), 'thesis': place(thesis_pos),
             'kept_rotation': kept, 'kept_direction': kept_direction,
-            'components': components,
-            'pieces': _labels(n_st, station[ij[kept_direction]] if len(idx) else s_ij)}
+            'components': components}
 
 
 def _components(n: int, edges: np.ndarray) -> list[int]:
@@ -240,11 +239,3 @@ def _levelling(ups: np.ndarray) -> np.ndarray:
     k = axis / sine
     skew = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
     return np.eye(3) + sine * skew + (1.0 - cosine) * skew @ skew
-
-
-def _labels(n: int, edges: np.ndarray) -> np.ndarray:
-    """Return the connected piece of each of ``n`` stations joined by ``edges``."""
-    if len(edges) == 0:
-        return np.arange(n)
-    graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    return connected_components(graph, directed=False)[1]

@@ -309,20 +309,13 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     fit = fit_views(n, station, odom_base, mount, measured, settings,
                (features, camera, settings.pairs))
     times['fit (first)'] = time.perf_counter() - t
-    # Second pass: near in space. Places of one piece of the first estimate are checked
-    # against it; places of two pieces (held together by the odometry alone: a room the
-    # robot entered by a door whose views did not pair) are searched twice as far and
-    # checked against the odometry, whose drift is what put them apart (the 25 cm floor:
-    # 1,462 pairs refused against a first estimate that had turned two rooms by 5 and 15
-    # degrees, leaving them in pieces).
+    # Second pass: near in space.
     cam = fit['camera']
-    piece = np.asarray(fit['pieces'])[station]
-    second, across = [], []
+    second = []
     for i in range(n):
         if not np.all(np.isfinite(cam[i])):
             continue
-        distance = np.linalg.norm(cam[:, :2] - cam[i, :2], axis=1)
-        near = distance <= np.where(piece == piece[i], 1.0, CROSS_RADIUS) * settings.radius_m
+        near = np.linalg.norm(cam[:, :2] - cam[i, :2], axis=1) <= settings.radius_m
         for j in np.flatnonzero(near):
             j = int(j)
             if j <= i or station[j] - station[i] <= settings.window:
@@ -330,10 +323,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
             if field_deg < 360.0 and abs(wrap_angle(cam[j, 2] - cam[i, 2])) > \
                     math.radians(0.5 * field_deg):
                 continue
-            (second if piece[j] == piece[i] else across).append((i, j))
+            second.append((i, j))
     measure(second, 'second', cam, np.zeros(n), np.zeros(n))
-    if across:
-        measure(across, 'across pieces', odom_cam, odo_turn_std, moved)
     t = time.perf_counter()
     fit = fit_views(n, station, odom_base, mount, measured, settings,
                (features, camera, settings.pairs))
@@ -356,10 +347,6 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     return PoseEstimation(base, thesis, joint, unrefined, odom_base.copy(), station, pairs,
                           fit['kept_rotation'], fit['kept_direction'], tried, refused, times,
                           fit['components'], refined, warnings)
-
-
-#: Pairs between pieces of the first estimate are searched this many radii apart.
-CROSS_RADIUS = 2.0
 
 
 #: A planar solver keeping less than this share of the matches the essential matrix keeps
