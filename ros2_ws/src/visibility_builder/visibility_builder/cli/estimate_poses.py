@@ -73,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
     from visibility_builder.estimation.accuracy import align_se2, pose_errors, similarity_scale
     from visibility_builder.estimation.pipeline import (
         EstimationSettings,
+        check_known_distance,
         estimate_poses,
         scaled_to_distance,
     )
@@ -106,14 +107,7 @@ def run(args: argparse.Namespace) -> int:
             raise VisibilityBuilderError('--known-distance takes two image indices and a '
                                          f'distance in metres, got {args.known_distance}'
                                          ) from None
-        count = len(exploration.frames)
-        if not (0 <= known[0] < count and 0 <= known[1] < count) or known[0] == known[1]:
-            raise VisibilityBuilderError(f'--known-distance: {args.bag} has {count} images; '
-                                         f'two different ones are needed, got {known[0]} '
-                                         f'and {known[1]}')
-        if not (np.isfinite(known[2]) and known[2] > 0):
-            raise VisibilityBuilderError(f'--known-distance: the distance must be positive, '
-                                         f'got {known[2]}')
+        check_known_distance(len(exploration.frames), *known)     # before the estimation
     settings = EstimationSettings(workers=args.workers)
     if args.window is not None:
         settings = replace(settings, window=args.window)

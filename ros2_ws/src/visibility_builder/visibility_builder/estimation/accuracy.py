@@ -35,22 +35,36 @@ class PoseErrors:
                 f'{self.heading_max_deg:.3f} deg')
 
 
+def _umeyama(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """Rotation, scale and the two means that best map the points ``a`` onto ``b``.
+
+    Umeyama's least squares over ``(n, d)`` finite rows: ``b ~ scale R (a - ma) + mb``.
+    """
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    u, singular, vt = np.linalg.svd((a - ma).T @ (b - mb))
+    d = np.ones(a.shape[1])
+    d[-1] = np.sign(np.linalg.det(vt.T @ u.T))
+    rotation = vt.T @ np.diag(d) @ u.T
+    return rotation, float(np.sum(singular * d) / np.sum((a - ma) ** 2)), ma, mb
+
+
+def _finite_rows(estimate: np.ndarray, truth: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    estimate = np.asarray(estimate, float)
+    truth = np.asarray(truth, float)
+    return estimate, truth, np.isfinite(estimate).all(axis=1) & np.isfinite(truth).all(axis=1)
+
+
 def align_se2(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
     """Return ``estimate`` (n, 3) moved by the planar rigid motion that best fits ``truth``.
 
     Rows with NaN in either are ignored for the fit and stay NaN.
     """
-    estimate = np.asarray(estimate, float)
-    truth = np.asarray(truth, float)
-    ok = np.isfinite(estimate).all(axis=1) & np.isfinite(truth).all(axis=1)
+    estimate, truth, ok = _finite_rows(estimate, truth)
     out = np.full_like(estimate, np.nan)
     if ok.sum() < 2:
         return out
-    a, b = estimate[ok, :2], truth[ok, :2]
-    ma, mb = a.mean(axis=0), b.mean(axis=0)
-    u, _, vt = np.linalg.svd((a - ma).T @ (b - mb))
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    r = vt.T @ np.diag([1.0, d]) @ u.T
+    r, _, ma, mb = _umeyama(estimate[ok, :2], truth[ok, :2])
     angle = float(np.arctan2(r[1, 0], r[0, 0]))
     good = np.isfinite(estimate).all(axis=1)
     out[good, :2] = (estimate[good, :2] - ma) @ r.T + mb
@@ -76,38 +90,24 @@ def similarity_scale(estimate: np.ndarray, truth: np.ndarray) -> float:
     """Return the scale of the similarity that best maps ``estimate`` onto ``truth``.
 
     One when the estimate has the true scale; ``1.002`` when it came out 0.2 % small
-    (Umeyama's scale over the rows finite in both; NaN with fewer than two).
+    (Umeyama's scale over the planar positions finite in both; NaN with fewer than two).
     """
-    estimate = np.asarray(estimate, float)
-    truth = np.asarray(truth, float)
-    ok = np.isfinite(estimate).all(axis=1) & np.isfinite(truth).all(axis=1)
+    estimate, truth, ok = _finite_rows(estimate, truth)
     if ok.sum() < 2:
         return float('nan')
-    a, b = estimate[ok, :2] - estimate[ok, :2].mean(axis=0), truth[ok, :2] - truth[ok, :2].mean(
-        axis=0)
-    u, singular, vt = np.linalg.svd(a.T @ b)
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    return float((singular[0] + d * singular[1]) / np.sum(a * a))
+    return _umeyama(estimate[ok, :2], truth[ok, :2])[1]
 
 
 def centre_errors_sim3(estimate: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Distances of ``estimate``'s 3-D points from ``truth``'s after the best similarity.
+    """Return the distances of ``estimate``'s 3-D points from ``truth``'s after a similarity.
 
     Umeyama's rotation, translation and scale over the rows finite in both; the other
     rows NaN. For structure from motion without a known length (its scale is free).
     """
-    estimate = np.asarray(estimate, float)
-    truth = np.asarray(truth, float)
-    ok = np.isfinite(estimate).all(axis=1) & np.isfinite(truth).all(axis=1)
+    estimate, truth, ok = _finite_rows(estimate, truth)
     out = np.full(len(estimate), np.nan)
     if ok.sum() < 3:
         return out
-    a, b = estimate[ok], truth[ok]
-    ma, mb = a.mean(axis=0), b.mean(axis=0)
-    u, singular, vt = np.linalg.svd((a - ma).T @ (b - mb))
-    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
-    r = vt.T @ d @ u.T
-    scale = float(np.sum(singular * np.diag(d)) / np.sum((a - ma) ** 2))
-    moved = scale * (estimate[ok] - ma) @ r.T + mb
-    out[ok] = np.linalg.norm(moved - b, axis=1)
+    r, scale, ma, mb = _umeyama(estimate[ok], truth[ok])
+    out[ok] = np.linalg.norm(scale * (estimate[ok] - ma) @ r.T + mb - truth[ok], axis=1)
     return out

@@ -34,12 +34,12 @@ from vbn_common.geometry.frames import compose_poses, wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.estimation.positions import fit_positions, refine_planar_positions
 from visibility_builder.estimation.rotations import (
+    far_misses,
     fit_rotations,
     matrix_to_quat,
+    pair_misses,
     planar_l1_angles,
-    quat_conj,
     quat_from_yaw,
-    quat_mul,
     quat_to_matrix,
     quat_yaw,
 )
@@ -84,6 +84,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     odo_rel = quat_from_yaw(-turn)             # camera i's planar frame into i+1's
     std = np.array([p.rotation_std for p in pairs])
     kept = np.ones(len(pairs), bool)
+    floor = math.radians(settings.max_rotation_error_deg)
     guess = None
     general = any(p.method == 'general_essential' for p in pairs)
     if general:
@@ -93,13 +94,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
                              np.concatenate([w, 1.0 / odo_std ** 2]), anchor=0, iterations=0)
         if len(pairs):
             # Judged against the heaviest tree first (see unordered.py).
-            q = tree.quaternions
-            err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
-            miss = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
-            miss = np.where(np.isfinite(miss), miss, np.inf)
-            kept = miss <= np.maximum(4.0 * std, max(
-                4.0 * 1.4826 * float(np.median(miss)),
-                math.radians(settings.max_rotation_error_deg)))
+            kept = ~far_misses(pair_misses(tree.quaternions, ij, rel), std, kept, floor)
     else:
         # A planar robot: the robust (L1) angles start the fit, their far misses dropped.
         start = np.concatenate([[0.0], np.cumsum(quat_yaw(odo_rel))])
@@ -109,26 +104,13 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
         guess = quat_from_yaw(angles)
         if len(pairs):
             miss = np.abs(wrap_angle(angles[ij[:, 1]] - angles[ij[:, 0]] - quat_yaw(rel)))
-            kept = miss <= np.maximum(4.0 * std, max(
-                4.0 * 1.4826 * float(np.median(miss)),
-                math.radians(settings.max_rotation_error_deg)))
+            kept = ~far_misses(miss, std, kept, floor)
     for _ in range(6):
         all_ij = np.concatenate([ij[kept], odo_ij])
         all_rel = np.concatenate([rel[kept], odo_rel])
         all_w = np.concatenate([w[kept], 1.0 / odo_std ** 2])
         rot = fit_rotations(n, all_ij, all_rel, all_w, anchor=0, guess=guess)
-        error = np.full(len(pairs), 0.0)
-        if len(pairs):
-            q = rot.quaternions
-            err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
-            error = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
-            error = np.where(np.isfinite(error), error, np.inf)
-        # Outliers: beyond 4 of their own standard deviations and 4 robust standard
-        # deviations of the kept pairs' errors (a wrong mode of a solver can be tens of
-        # times off its claimed precision and yet within a fixed threshold).
-        spread = 4.0 * 1.4826 * float(np.median(error[kept])) if kept.any() else 0.0
-        bad = kept & (error > np.maximum(4.0 * std, max(
-            spread, math.radians(settings.max_rotation_error_deg))))
+        bad = far_misses(pair_misses(rot.quaternions, ij, rel), std, kept, floor)
         if not bad.any():
             break
         kept &= ~bad

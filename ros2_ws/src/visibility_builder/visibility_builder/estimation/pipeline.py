@@ -68,7 +68,8 @@ from visibility_builder.estimation.rotations import matrix_to_quat, quat_yaw
 from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
 
 __all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_from_odometry', 'estimate_poses',
-           'estimated_exploration', 'matrix_to_quat', 'scaled_to_distance']
+           'check_known_distance', 'estimated_exploration', 'matrix_to_quat',
+           'scaled_to_distance']
 
 _LOG = logging.getLogger(__name__)
 
@@ -413,6 +414,16 @@ def _disagrees(motion: PairMotion, predicted: np.ndarray, turn_std: float,
     return ''
 
 
+def check_known_distance(count: int, first: int, second: int, metres: float) -> None:
+    """Raise unless images ``first`` and ``second`` of ``count`` can be ``metres`` apart."""
+    if not (0 <= first < count and 0 <= second < count) or first == second:
+        raise VisibilityBuilderError(f'--known-distance: {count} images; two different ones '
+                                     f'are needed, got {first} and {second}')
+    if not (math.isfinite(metres) and metres > 0):
+        raise VisibilityBuilderError(f'--known-distance: the distance must be positive, got '
+                                     f'{metres}')
+
+
 def scaled_to_distance(result: PoseEstimation, first: int, second: int,
                        metres: float) -> PoseEstimation:
     """Return ``result`` scaled so that images ``first`` and ``second`` are ``metres`` apart.
@@ -431,12 +442,7 @@ def scaled_to_distance(result: PoseEstimation, first: int, second: int,
             distance that is not positive, or images without an estimate or at one
             place.
     """
-    n = len(result.base_poses)
-    if not (0 <= first < n and 0 <= second < n) or first == second:
-        raise VisibilityBuilderError(f'--known-distance needs two different images in 0..'
-                                     f'{n - 1}, got {first} and {second}')
-    if not (math.isfinite(metres) and metres > 0):
-        raise VisibilityBuilderError(f'a known distance must be positive, got {metres}')
+    check_known_distance(len(result.base_poses), first, second, metres)
     base = result.base_poses
     if not (np.isfinite(base[first]).all() and np.isfinite(base[second]).all()):
         raise VisibilityBuilderError(f'image {first} or {second} has no estimated pose')

@@ -385,6 +385,7 @@ def refine_general(rotations: np.ndarray, centres: np.ndarray, observations: np.
     calibration = gtsam.Cal3_S2(camera.fx, camera.fy, 0.0, camera.cx, camera.cy)
     sensor = gtsam.Pose3(gtsam.Rot3(BASE_TO_CAMERA_ROTATION), np.zeros(3))
     cams = np.flatnonzero(solved)
+    n_cams = len(solved)
     anchor = int(cams[0])
     far = int(cams[np.argmax(np.linalg.norm(centres[cams] - centres[anchor], axis=1))])
     spread = float(np.linalg.norm(centres[far] - centres[anchor]))
@@ -415,16 +416,22 @@ def refine_general(rotations: np.ndarray, centres: np.ndarray, observations: np.
         return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
 
     def errors(result: object) -> np.ndarray:
-        out = np.full(len(observations), np.inf)
-        for k in np.flatnonzero(use):
-            pose = result.atPose3(X(int(img[k]))).compose(sensor)
-            try:
-                projected = gtsam.PinholeCameraCal3_S2(pose, calibration).project(
-                    result.atPoint3(L(int(observations[k, 0]))))
-            except RuntimeError:                       # behind the camera
-                continue
-            out[k] = float(np.linalg.norm(projected - uv[k]))
-        return out
+        """Pixel distance of each used observation from its point's projection (else inf)."""
+        optical = np.zeros((n_cams, 3, 3))          # optical axes into the world
+        centre = np.zeros((n_cams, 3))
+        for i in cams:
+            pose = result.atPose3(X(int(i)))
+            optical[i] = pose.rotation().matrix() @ BASE_TO_CAMERA_ROTATION
+            centre[i] = pose.translation()
+        point = np.full((n_tracks, 3), np.nan)
+        for t in np.flatnonzero(good):
+            point[t] = result.atPoint3(L(int(t)))
+        local = np.einsum('mji,mj->mi', optical[img], point[observations[:, 0]] - centre[img])
+        with np.errstate(invalid='ignore', divide='ignore'):
+            projected = np.stack([camera.fx * local[:, 0] / local[:, 2] + camera.cx,
+                                  camera.fy * local[:, 1] / local[:, 2] + camera.cy], axis=1)
+            out = np.linalg.norm(projected - uv, axis=1)
+        return np.where(use & (local[:, 2] > 0) & np.isfinite(out), out, np.inf)
 
     result = solve(use, noise_px, huber_px)
     first = errors(result)

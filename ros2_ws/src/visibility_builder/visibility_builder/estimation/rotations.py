@@ -40,8 +40,9 @@ from scipy.sparse.linalg import spsolve
 
 from visibility_builder.errors import VisibilityBuilderError
 
-__all__ = ['RotationFit', 'fit_rotations', 'matrix_to_quat', 'planar_l1_angles', 'quat_angle',
-           'quat_conj', 'quat_from_yaw', 'quat_mul', 'quat_to_matrix', 'quat_yaw']
+__all__ = ['RotationFit', 'far_misses', 'fit_rotations', 'matrix_to_quat', 'pair_misses',
+           'planar_l1_angles', 'quat_angle', 'quat_conj', 'quat_from_yaw', 'quat_mul',
+           'quat_to_matrix', 'quat_yaw']
 
 
 def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -153,6 +154,29 @@ def _spanning_guess(n: int, pairs: np.ndarray, relative: np.ndarray, weights: np
     connected = np.zeros(n, bool)
     connected[order] = True
     return q, connected
+
+
+def pair_misses(quaternions: np.ndarray, pairs: np.ndarray, relative: np.ndarray
+                ) -> np.ndarray:
+    """Angle of ``q_j^-1 q_ij q_i`` per pair, radians; inf where a view has no rotation."""
+    q = np.asarray(quaternions, float)
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    miss = quat_angle(quat_mul(quat_conj(q[pairs[:, 1]]), quat_mul(relative, q[pairs[:, 0]])))
+    return np.where(np.isfinite(miss), miss, np.inf)
+
+
+def far_misses(miss: np.ndarray, std: np.ndarray, kept: np.ndarray, floor: float
+               ) -> np.ndarray:
+    """Return the kept pairs whose ``miss`` is beyond their own and the kept pairs' spread.
+
+    A pair is far when it misses by more than four of its own standard deviations, four
+    robust standard deviations (1.4826 times the median) of the kept pairs' misses and
+    ``floor`` radians: a wrong mode of a solver can be tens of times off its claimed
+    precision and yet within a fixed threshold.
+    """
+    kept = np.asarray(kept, bool)
+    spread = 4.0 * 1.4826 * float(np.median(miss[kept])) if kept.any() else 0.0
+    return kept & (miss > np.maximum(4.0 * np.asarray(std, float), max(spread, floor)))
 
 
 def planar_l1_angles(n: int, pairs: np.ndarray, measured: np.ndarray, weights: np.ndarray,

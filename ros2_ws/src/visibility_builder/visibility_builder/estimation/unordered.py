@@ -36,10 +36,10 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.estimation.positions import fit_positions
 from visibility_builder.estimation.refinement import refine_general, tracks_from_pairs
 from visibility_builder.estimation.rotations import (
+    far_misses,
     fit_rotations,
     matrix_to_quat,
-    quat_conj,
-    quat_mul,
+    pair_misses,
     quat_to_matrix,
 )
 from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
@@ -137,12 +137,7 @@ def estimate_unordered(features: list[ImageFeatures], camera: CameraModel,
         else:
             fit = guess
         q = fit.quaternions
-        err_q = quat_mul(quat_conj(q[ij[:, 1]]), quat_mul(rel, q[ij[:, 0]]))
-        error = 2.0 * np.arctan2(np.linalg.norm(err_q[:, 1:], axis=1), np.abs(err_q[:, 0]))
-        error = np.where(np.isfinite(error), error, np.inf)
-        spread = 4.0 * 1.4826 * float(np.median(error[kept]))
-        bad = kept & (error > np.maximum(4.0 * std, max(
-            spread, math.radians(max_rotation_error_deg))))
+        bad = far_misses(pair_misses(q, ij, rel), std, kept, math.radians(max_rotation_error_deg))
         if not bad.any() and iteration:
             break               # the least squares ran and dropped nothing more
         kept &= ~bad
@@ -173,7 +168,9 @@ def estimate_unordered(features: list[ImageFeatures], camera: CameraModel,
                                     np.array([(p.i, p.j) for p in chosen], np.int64),
                                     [p.features for p in chosen])
         if len(rows):
-            uv = np.array([features[i].keypoints[f] for _, i, f in rows], float)
+            rows = rows[np.argsort(rows[:, 1], kind='stable')]      # image by image
+            uv = np.concatenate([features[i].keypoints[rows[rows[:, 1] == i, 2]]
+                                 for i in range(n)]).astype(float)
             refined = refine_general(to_world, thesis, rows[:, :2], uv, camera, solved)
             centres = np.where(solved[:, None], refined.centres, np.nan)
             to_world = np.where(solved[:, None, None], refined.rotations, to_world)
