@@ -97,9 +97,10 @@ def run(args: argparse.Namespace) -> int:
                 for seed in seeds:
                     rows.append(_one(out, scene, camera, drift, seed, args))
     lines = ['| scene | camera | drift | seed | odometry median / max | thesis median / max | '
-             'refined median / max, heading | scale error | estimate time | room_run, DB '
-             'of estimated poses: median / p95 (ratio) | ... scaled by a known distance | '
-             'DB of true poses |', '|' + '---|' * 12]
+             'refined median / max, heading | pieces (the largest alone: images, median / '
+             'max) | scale error | estimate time | room_run, DB of estimated poses: median / '
+             'p95 (ratio) | ... scaled by a known distance | DB of true poses |',
+             '|' + '---|' * 13]
     passed = True
     for r in rows:
         odo, thesis, res = r['odometry'], r['thesis'], r['result']
@@ -117,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
             f"{100 * odo['position_median']:.2f} / {100 * odo['position_max']:.1f} cm | "
             f"{100 * thesis['position_median']:.2f} / {100 * thesis['position_max']:.2f} cm | "
             f"{100 * res['position_median']:.2f} / {100 * res['position_max']:.2f} cm, "
-            f"{res['heading_median_deg']:.3f} deg | "
+            f"{res['heading_median_deg']:.3f} deg | {_pieces(r)} | "
             f"{100 * (r.get('result_scale', float('nan')) - 1):+.3f} % | "
             f"{sum(r['times'].values()):.0f} s | {db('estimated')} | {db('known')} | "
             f"{db('truth')} |")
@@ -138,6 +139,16 @@ def run(args: argparse.Namespace) -> int:
           'farthest apart, to the millimetre, replaces it in the last database)')
     write_text_atomic(out / 'summary.json', json.dumps(rows, indent=2, default=float))
     return 0 if passed else 1
+
+
+def _pieces(row: dict[str, Any]) -> str:
+    """Return the count of view-graph pieces and the largest one's own figures."""
+    count = row.get('pieces', 1)
+    piece = row.get('largest_piece')
+    if piece is None:
+        return str(count)
+    return (f"{count} ({piece['count']}: {100 * piece['position_median']:.2f} / "
+            f"{100 * piece['position_max']:.2f} cm)")
 
 
 def _one(out: Path, scene: str, camera: str, drift: float, seed: int,

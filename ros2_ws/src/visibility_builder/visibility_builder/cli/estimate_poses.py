@@ -71,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
     from vbn_common.exploration import ReadConfig, read_exploration
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.estimation.accuracy import align_se2, pose_errors, similarity_scale
+    from visibility_builder.estimation.odometry_path import odometry_steps
     from visibility_builder.estimation.pipeline import (
         EstimationSettings,
         check_known_distance,
@@ -114,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
     if args.radius is not None:
         settings = replace(settings, radius_m=args.radius)
     progress = None if args.quiet or not sys.stderr.isatty() else _progress
-    result = estimate_poses(exploration, settings, progress)
+    steps = odometry_steps(args.bag, exploration.stamps_ns(), exploration.base_poses())
+    result = estimate_poses(exploration, settings, progress, steps=steps)
     if progress is not None:
         print(file=sys.stderr)
     if known is not None:
@@ -148,6 +150,7 @@ def run(args: argparse.Namespace) -> int:
     figures: dict[str, Any] = {'images': n, 'estimated': estimated, 'written': written,
                                'pairs': len(result.pairs), 'tried': result.tried,
                                'refused': result.refused, 'times': result.times,
+                               'pieces': len(result.components),
                                'components': result.components[:10],
                                'warnings': result.warnings}
     if truth is not None:
@@ -157,6 +160,14 @@ def run(args: argparse.Namespace) -> int:
             errors = pose_errors(p, truth)
             print(f'  {name:<10} against /ground_truth/pose (SE(2) aligned): {errors.line()}')
             figures[name] = errors.__dict__
+        largest = result.pieces == 0
+        if len(result.components) > 1 and largest.sum() >= 3:
+            # The largest piece on its own (its own alignment): the others rest on the
+            # odometry, and their error would hide how well the pairs posed the piece.
+            errors = pose_errors(result.base_poses[largest], truth[largest])
+            print(f'  largest piece ({int(largest.sum())} images, aligned alone): '
+                  f'{errors.line()}')
+            figures['largest_piece'] = errors.__dict__
         figures['result_scale'] = similarity_scale(result.base_poses, truth)
         print(f"  scale: the truth is {figures['result_scale']:.5f} times the result's size "
               '(a similarity alignment)')

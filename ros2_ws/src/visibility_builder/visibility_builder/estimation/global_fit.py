@@ -32,6 +32,7 @@ from scipy.sparse.csgraph import connected_components
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.frames import compose_poses, wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.estimation.odometry_path import step_stds, straight_steps
 from visibility_builder.estimation.positions import fit_positions, refine_planar_positions
 from visibility_builder.estimation.rotations import (
     far_misses,
@@ -63,12 +64,14 @@ _LOG = logging.getLogger(__name__)
 
 def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndarray,
          measured: dict[tuple[int, int], PairMotion], settings: EstimationSettings,
-         refit: tuple[list[ImageFeatures], object, PairSettings] | None = None
-         ) -> dict[str, object]:
+         refit: tuple[list[ImageFeatures], object, PairSettings] | None = None,
+         steps: np.ndarray | None = None) -> dict[str, object]:
     """Rotations, then positions (with and without odometry), in the ``map`` frame.
 
     ``refit``: ``(features, camera, pair settings)`` to refit each pair's bearing under
-    the fitted rotations (planar pairs), or None to take the pairs' own.
+    the fitted rotations (planar pairs), or None to take the pairs' own. ``steps``:
+    ``(n - 1, 2)`` path length and turning between consecutive images
+    (:func:`~.odometry_path.odometry_steps`; None: the straight lines).
     """
     pairs = list(measured.values())
     odom_cam = np.array([compose_poses(p, mount) for p in odom_base])
@@ -77,9 +80,9 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     rel = np.array([matrix_to_quat(p.rotation) for p in pairs]).reshape(-1, 4)
     w = np.array([1.0 / p.rotation_std ** 2 for p in pairs])
     turn = wrap_angle(np.diff(odom_cam[:, 2]))
-    driven = np.linalg.norm(np.diff(odom_base[:, :2], axis=0), axis=1)
-    odo_std = settings.odometry_yaw_floor + settings.odometry_turn_std * np.abs(turn) + \
-        settings.odometry_yaw_drift_std * driven
+    if steps is None:
+        steps = straight_steps(odom_base)
+    _, odo_std = step_stds(steps, settings)
     odo_ij = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
     odo_rel = quat_from_yaw(-turn)             # camera i's planar frame into i+1's
     std = np.array([p.rotation_std for p in pairs])
@@ -156,8 +159,9 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     turn_to_world = base_yaw_est[a_st] - st_odom[a_st, 2]
     c, s = np.cos(turn_to_world), np.sin(turn_to_world)
     disp = np.stack([c * delta[:, 0] - s * delta[:, 1], s * delta[:, 0] + c * delta[:, 1]], 1)
-    o_std = settings.odometry_std_floor_m + settings.odometry_std_per_m * \
-        np.linalg.norm(delta, axis=1)
+    # A station step's path: its images' steps between the two stations' first images.
+    cum = np.concatenate([np.zeros((1, 2)), np.cumsum(steps, axis=0)])
+    o_std, _ = step_stds(cum[first_of[b_st]] - cum[first_of[a_st]], settings)
     odometry = (np.stack([a_st, b_st], 1), disp, 1.0 / o_std ** 2)
     max_angle = math.radians(settings.max_direction_error_deg)
     combined = fit_positions(n_st, s_ij, dirs, w_dir, anchor=0, odometry=odometry,
@@ -185,7 +189,7 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
                 seed, s_ij, np.arctan2(dirs[:, 1], dirs[:, 0]), dstd, odometry)
             kept_direction[:] = False
             kept_direction[idx[miss <= 3.0 * dstd]] = True
-    components = _components(n_st, station[ij[kept_direction]] if len(idx) else s_ij)
+    components, piece = _components(n_st, station[ij[kept_direction]] if len(idx) else s_ij)
     origin = odom_cam[0, :2]
 
     def place(positions: np.ndarray) -> np.ndarray:
@@ -199,15 +203,23 @@ def fit_views(n: int, station: np.ndarray, odom_base: np.ndarray, mount: np.ndar
     # Positions are the cameras' (mount included): the first camera at its odometry pose.
     return {'camera': place(joint_pos), 'thesis': place(thesis_pos),
             'kept_rotation': kept, 'kept_direction': kept_direction,
-            'components': components}
+            'components': components, 'pieces': piece[station]}
 
 
-def _components(n: int, edges: np.ndarray) -> list[int]:
+def _components(n: int, edges: np.ndarray) -> tuple[list[int], np.ndarray]:
+    """Return the stations' component sizes (largest first) and each one's component.
+
+    Components are numbered by size, the largest 0.
+    """
     if len(edges) == 0:
-        return [1] * n
+        return [1] * n, np.arange(n)
     graph = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
     count, labels = connected_components(graph, directed=False)
-    return sorted(np.bincount(labels, minlength=count).tolist(), reverse=True)
+    sizes = np.bincount(labels, minlength=count)
+    order = np.argsort(-sizes, kind='stable')
+    rank = np.empty(count, np.int64)
+    rank[order] = np.arange(count)
+    return sizes[order].tolist(), rank[labels]
 
 
 def _levelling(ups: np.ndarray) -> np.ndarray:

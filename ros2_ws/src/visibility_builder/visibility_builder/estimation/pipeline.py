@@ -23,8 +23,13 @@ Steps (each timed and counted in :class:`PoseEstimation`):
    robust non-linear fit of bearings and odometry that the linear fits seed.
 6. **Pairs, second pass**: the pairs of stations within ``radius_m`` of each other in
    that estimate that the first pass did not try (the exploration's other rows, a
-   loop's return), measured and checked against that estimate, then rotations and
-   positions fitted again over all.
+   loop's return) and that lie in one piece of the view graph, measured and checked
+   against that estimate, then rotations and positions fitted again over all. Pairs
+   between pieces (rooms joined only by the odometry of a drive through a door) are
+   judged together instead (:mod:`.linking`: the correction most of them agree on,
+   within what the odometry allows), and the second pass is repeated on the joined
+   estimate. The odometry's uncertainty follows the path driven and turned between
+   images (:mod:`.odometry_path`).
 7. **The thesis's own result**: the positions from the directions alone (no odometry
    rows), scaled by the length of the odometry's path, kept beside the joint estimate
    (the robust fit where there is one); the joint estimate is the bundle adjustment's
@@ -58,6 +63,12 @@ from vbn_common.geometry.frames import (
 )
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.estimation.global_fit import TILT_STD, fit_views
+from visibility_builder.estimation.linking import join_pieces, link_candidates, near_pairs
+from visibility_builder.estimation.odometry_path import (
+    odometry_steps,
+    step_stds,
+    straight_steps,
+)
 from visibility_builder.estimation.refinement import (
     RefinementResult,
     RefinementSettings,
@@ -83,6 +94,9 @@ class EstimationSettings:
         sift: SIFT settings (the builder's).
         window: First pass: each station is paired with the next ``window`` stations.
         radius_m: Second pass: stations this close in the first estimate are paired.
+        link_radius_m: Views of different pieces this close in the estimate are paired
+            and the pairs judged together (:mod:`.linking`).
+        link_rounds: At most this many rounds of joining pieces.
         station_tolerance_m: Consecutive images whose odometry moved less are one place.
         odometry_std_per_m: Standard deviation of an odometry displacement per metre.
         odometry_std_floor_m: ... added to every displacement, metres.
@@ -103,6 +117,8 @@ class EstimationSettings:
     sift: SiftConfig = SiftConfig(n_octave_layers=5, precise_upscale=True)
     window: int = 4
     radius_m: float = 0.75
+    link_radius_m: float = 2.5
+    link_rounds: int = 3
     station_tolerance_m: float = 0.01
     odometry_std_per_m: float = 0.02
     odometry_std_floor_m: float = 0.002
@@ -118,7 +134,7 @@ class EstimationSettings:
     def __post_init__(self) -> None:
         if self.window < 1:
             raise VisibilityBuilderError(f'window must be at least 1, got {self.window}')
-        for name in ('radius_m', 'station_tolerance_m', 'odometry_std_per_m',
+        for name in ('radius_m', 'link_radius_m', 'station_tolerance_m', 'odometry_std_per_m',
                      'odometry_std_floor_m', 'odometry_turn_std', 'odometry_yaw_floor',
                      'max_rotation_error_deg', 'max_direction_error_deg'):
             value = getattr(self, name)
@@ -153,6 +169,7 @@ class PoseEstimation:
         components: Station components the pairs join (the largest is estimated).
         refinement: The bundle adjustment's figures (None without it).
         warnings: What the estimate had to work round (a tilting camera).
+        pieces: ``(n,)`` each image's piece of the view graph (0: the largest).
     """
 
     base_poses: np.ndarray
@@ -170,6 +187,7 @@ class PoseEstimation:
     components: list[int] = field(default_factory=list)
     refinement: RefinementResult | None = None
     warnings: list[str] = field(default_factory=list)
+    pieces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
 
 def _stations(odom: np.ndarray, tolerance: float) -> np.ndarray:
@@ -206,7 +224,8 @@ class _Progress:
 
 def estimate_poses(exploration: Exploration, settings: EstimationSettings = EstimationSettings(),
                    progress: Callable[[str, int, int], None] | None = None,
-                   features: list[ImageFeatures] | None = None) -> PoseEstimation:
+                   features: list[ImageFeatures] | None = None,
+                   steps: np.ndarray | None = None) -> PoseEstimation:
     """Estimate every image's pose from the images and the odometry (module docstring).
 
     Args:
@@ -215,6 +234,9 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         settings: See :class:`EstimationSettings`.
         progress: Called as ``(step, done, total)``.
         features: The images' SIFT features when already extracted.
+        steps: ``(n - 1, 2)`` the path driven (m) and turned (rad) between consecutive
+            images (:func:`~.odometry_path.odometry_steps`); None: the straight lines
+            between their odometry poses.
 
     Returns:
         The estimate (see :class:`PoseEstimation`).
@@ -231,6 +253,10 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     odom_base = exploration.base_poses()
     odom_cam = exploration.camera_poses()
     mount = compose_poses(invert_pose(odom_base[0]), odom_cam[0])   # camera on the base
+    steps = straight_steps(odom_base) if steps is None else np.asarray(steps, float)
+    if steps.shape != (n - 1, 2):
+        raise VisibilityBuilderError(f'steps: {n} images need ({n - 1}, 2) path lengths and '
+                                     f'turnings, got {steps.shape}')
     t = time.perf_counter()
     station = _stations(odom_base, settings.station_tolerance_m)
     times['stations'] = time.perf_counter() - t
@@ -247,31 +273,36 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     times['features'] = time.perf_counter() - t
     camera = exploration.camera_model()
     field_deg = _field_deg(exploration)
-    refused: dict[str, int] = {}
     measured: dict[tuple[int, int], PairMotion] = {}
+    seen: dict[tuple[int, int], tuple[PairMotion | None, str]] = {}   # every measurement
+    verdict: dict[tuple[int, int], str] = {}                          # why refused, or ''
     tried: dict[str, int] = {}
+
+    def raw(pairs: list[tuple[int, int]], name: str) -> None:
+        t0 = time.perf_counter()
+        todo = [c for c in pairs if c not in seen]
+        tried[name] = tried.get(name, 0) + len(todo)
+        for k, (i, j) in enumerate(todo):
+            seen[(i, j)] = measure_pair(i, j, features[i], features[j], camera, settings.pairs,
+                                        moved=bool(station[i] != station[j]))
+            report(f'pairs ({name})', k + 1, len(todo))
+        times[f'pairs ({name})'] = times.get(f'pairs ({name})', 0.0) + time.perf_counter() - t0
 
     def measure(candidates: list[tuple[int, int]], name: str, reference: np.ndarray,
                 turn_std: np.ndarray, path: np.ndarray) -> None:
-        t0 = time.perf_counter()
-        todo = [c for c in candidates if c not in measured and (c[1], c[0]) not in measured]
-        tried[name] = len(todo)
-        for k, (i, j) in enumerate(todo):
-            motion, why = measure_pair(i, j, features[i], features[j], camera, settings.pairs,
-                                       moved=bool(station[i] != station[j]))
+        raw([c for c in candidates if c not in measured], name)
+        for i, j in candidates:
+            if (i, j) in measured:
+                continue
+            motion, why = seen[(i, j)]
             if motion is not None:
                 driven = abs(float(path[j] - path[i]))
                 why = _disagrees(motion, compose_poses(invert_pose(reference[i]), reference[j]),
                                  abs(float(turn_std[j] - turn_std[i])),
                                  settings.odometry_std_per_m * driven)
-                motion = None if why else motion
-            if motion is None:
-                key = why.split(':')[0] if ':' in why else why.split(' ', 1)[-1]
-                refused[key] = refused.get(key, 0) + 1
-            else:
+            verdict[(i, j)] = why
+            if not why:
                 measured[(i, j)] = motion
-            report(f'pairs ({name})', k + 1, len(todo))
-        times[f'pairs ({name})'] = time.perf_counter() - t0
 
     # First pass: near in time.
     first = []
@@ -285,9 +316,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                 continue
             first.append((i, j))
     # The odometry predicts the motion between images near in time within its drift.
-    turned = np.concatenate([[0.0], np.cumsum(np.abs(wrap_angle(np.diff(odom_cam[:, 2]))))])
-    moved = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(odom_base[:, :2], axis=0),
-                                                            axis=1))])
+    turned = np.concatenate([[0.0], np.cumsum(steps[:, 1])])
+    moved = np.concatenate([[0.0], np.cumsum(steps[:, 0])])
     odo_turn_std = settings.odometry_turn_std * turned + settings.odometry_yaw_drift_std * moved
     measure(first, 'first', odom_cam, odo_turn_std, moved)
     warnings: list[str] = []
@@ -300,41 +330,65 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         settings = replace(settings, pairs=replace(settings.pairs, method='general_essential'),
                            refinement=replace(settings.refinement, tilt_std=TILT_STD))
         measured.clear()
-        refused.clear()
+        seen.clear()
+        verdict.clear()
         measure(first, 'first', odom_cam, odo_turn_std, moved)
     if not measured:
         raise VisibilityBuilderError('no two images overlap: no pair of images has '
                                      f'{settings.pairs.min_matches} matches that one motion '
                                      'explains')
-    t = time.perf_counter()
-    fit = fit_views(n, station, odom_base, mount, measured, settings,
-               (features, camera, settings.pairs))
-    times['fit (first)'] = time.perf_counter() - t
-    # Second pass: near in space.
-    cam = fit['camera']
-    second = []
-    for i in range(n):
-        if not np.all(np.isfinite(cam[i])):
-            continue
-        near = np.linalg.norm(cam[:, :2] - cam[i, :2], axis=1) <= settings.radius_m
-        for j in np.flatnonzero(near):
-            j = int(j)
-            if j <= i or station[j] - station[i] <= settings.window:
-                continue
-            if field_deg < 360.0 and abs(wrap_angle(cam[j, 2] - cam[i, 2])) > \
-                    math.radians(0.5 * field_deg):
-                continue
-            second.append((i, j))
-    measure(second, 'second', cam, np.zeros(n), np.zeros(n))
-    t = time.perf_counter()
-    fit = fit_views(n, station, odom_base, mount, measured, settings,
-               (features, camera, settings.pairs))
-    times['fit (final)'] = time.perf_counter() - t
+    def refit(name: str) -> dict:
+        t0 = time.perf_counter()
+        out = fit_views(n, station, odom_base, mount, measured, settings,
+                        (features, camera, settings.pairs), steps)
+        times[name] = times.get(name, 0.0) + time.perf_counter() - t0
+        return out
+
+    def near_in_space(fit: dict) -> dict:
+        # Within a piece each pair is judged against the estimate; between two pieces
+        # the estimate is as far off as the odometry, and the pairs are judged together.
+        near = near_pairs(fit['camera'], station, settings.radius_m, settings.window,
+                          field_deg)
+        pieces = fit['pieces']
+        measure([c for c in near if pieces[c[0]] == pieces[c[1]]], 'second', fit['camera'],
+                np.zeros(n), np.zeros(n))
+        return refit('fit (final)')
+
+    # Second pass: near in space in the first estimate.
+    step_std = step_stds(steps, settings)
+    fit = near_in_space(refit('fit (first)'))
+    # Pieces joined by the consensus of their pairs (.linking), then near in space again.
+    for round_ in range(settings.link_rounds):
+        pieces = fit['pieces']
+        if int(pieces.max()) == 0:
+            break
+        candidates = sorted(set(link_candidates(fit['camera'], pieces, settings.link_radius_m,
+                                                field_deg=field_deg)) |
+                            {c for c in near_pairs(fit['camera'], station, settings.radius_m,
+                                                   settings.window, field_deg)
+                             if pieces[c[0]] != pieces[c[1]]})
+        raw(candidates, 'links')
+        added = join_pieces(fit['camera'], pieces,
+                            [seen[c][0] for c in candidates if seen[c][0] is not None],
+                            settings.pairs.seed + round_, step_std)
+        for c in candidates:
+            verdict.setdefault(c, seen[c][1] or 'between pieces: no consensus')
+        if not added:
+            break
+        for motion in added:
+            measured[(motion.i, motion.j)] = motion
+            verdict[(motion.i, motion.j)] = ''
+        fit = near_in_space(refit('fit (final)'))
+    refused: dict[str, int] = {}
+    for key, why in verdict.items():
+        if why and key not in measured:
+            reason = why.split(':')[0] if ':' in why else why.split(' ', 1)[-1]
+            refused[reason] = refused.get(reason, 0) + 1
     pairs = list(measured.values())
     refined = None
     if settings.refine:
         t = time.perf_counter()
-        refined = _refine(fit, pairs, features, camera, odom_cam, settings)
+        refined = _refine(fit, pairs, features, camera, odom_cam, settings, steps)
         times['refine'] = time.perf_counter() - t
     joint = np.array([compose_poses(c, invert_pose(mount)) if np.all(np.isfinite(c))
                       else np.full(3, np.nan) for c in fit['camera']])
@@ -347,7 +401,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         base = np.array([compose_poses(c, invert_pose(mount)) for c in refined.camera_poses])
     return PoseEstimation(base, thesis, joint, unrefined, odom_base.copy(), station, pairs,
                           fit['kept_rotation'], fit['kept_direction'], tried, refused, times,
-                          fit['components'], refined, warnings)
+                          fit['components'], refined, warnings, fit['pieces'])
 
 
 #: A planar solver keeping less than this share of the matches the essential matrix keeps
@@ -503,13 +557,14 @@ def estimate_from_odometry(bag: str | os.PathLike[str], read: ReadConfig,
                                      'estimate them from') from None
     _LOG.warning('%s has no poses of its images: estimating them from the images and the '
                  'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
-    result = estimate_poses(odometry, EstimationSettings(workers=workers))
+    steps = odometry_steps(bag, odometry.stamps_ns(), odometry.base_poses())
+    result = estimate_poses(odometry, EstimationSettings(workers=workers), steps=steps)
     return estimated_exploration(odometry, result)
 
 
 def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[ImageFeatures],
-            camera: object, odom_cam: np.ndarray, settings: EstimationSettings
-            ) -> RefinementResult | None:
+            camera: object, odom_cam: np.ndarray, settings: EstimationSettings,
+            steps: np.ndarray) -> RefinementResult | None:
     """Bundle-adjust the fitted camera poses over the kept pairs' tracks and the odometry."""
     start = np.asarray(fit['camera'], float)
     if not np.isfinite(start).all():
@@ -534,10 +589,7 @@ def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[Imag
     n = len(features)
     rel = np.array([compose_poses(invert_pose(odom_cam[i]), odom_cam[i + 1])
                     for i in range(n - 1)]).reshape(-1, 3)
-    dist = np.linalg.norm(rel[:, :2], axis=1)
-    sig_xy = settings.odometry_std_floor_m + settings.odometry_std_per_m * dist
-    sig_yaw = settings.odometry_yaw_floor + settings.odometry_turn_std * np.abs(rel[:, 2]) + \
-        settings.odometry_yaw_drift_std * dist
+    sig_xy, sig_yaw = step_stds(steps, settings)
     odometry = (np.stack([np.arange(n - 1), np.arange(1, n)], axis=1), rel,
                 np.stack([sig_xy, sig_xy, sig_yaw], axis=1))
     try:
