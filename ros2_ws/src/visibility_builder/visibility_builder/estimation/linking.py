@@ -39,8 +39,8 @@ __all__ = ['MIN_LINK_PAIRS', 'LinkBound', 'LinkCorrection', 'consensus', 'join_p
 
 #: A correction between two pieces needs this many agreeing pairs, with at least
 #: ``MIN_LINK_VIEWS`` distinct views on each side.
-MIN_LINK_PAIRS = 5
-MIN_LINK_VIEWS = 2
+MIN_LINK_PAIRS = 8
+MIN_LINK_VIEWS = 3
 #: Agreement: a pair's rotation within this of the correction's (or three of its
 #: standard deviations), degrees; its bearing within ``DIRECTION_TOL_DEG``.
 ROTATION_TOL_DEG = 0.5
