@@ -315,13 +315,10 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                     math.radians(field_deg):
                 continue
             first.append((i, j))
-    # The odometry predicts the motion between images near in time within its drift, the
-    # gates from the straight lines between the images (from the path driven, a drive
-    # through a door opened them to any direction, and a wrong pair through a wall came
-    # in: on a hold-out 0.75 m floor the largest piece 0.56 -> 53 cm).
-    straight = straight_steps(odom_base)
-    turned = np.concatenate([[0.0], np.cumsum(straight[:, 1])])
-    moved = np.concatenate([[0.0], np.cumsum(straight[:, 0])])
+    # The odometry predicts the motion of images near in time; the gates on the straight
+    # lines (on the path driven, a drive through a door opened them: docs/estimation.md).
+    along = np.concatenate([np.zeros((1, 2)), np.cumsum(straight_steps(odom_base), axis=0)])
+    moved, turned = along[:, 0], along[:, 1]
     odo_turn_std = settings.odometry_turn_std * turned + settings.odometry_yaw_drift_std * moved
     measure(first, 'first', odom_cam, odo_turn_std, moved)
     warnings: list[str] = []
