@@ -12,7 +12,7 @@ from exploration_samples import POSE, T0, pose, write_bag
 import numpy as np
 import pytest
 
-from vbn_common.geometry.frames import compose_poses, invert_pose
+from vbn_common.geometry.frames import compose_poses, invert_pose, transform_points
 from visibility_builder.estimation.linking import (
     MIN_LINK_PAIRS,
     LinkBound,
@@ -27,9 +27,8 @@ from visibility_builder.estimation.view_pairs import PairMotion
 
 
 def _rigid(poses: np.ndarray, rotation: float, translation: np.ndarray) -> np.ndarray:
-    c, s = math.cos(rotation), math.sin(rotation)
     out = poses.copy()
-    out[:, :2] = poses[:, :2] @ np.array([[c, s], [-s, c]]) + translation
+    out[:, :2] = transform_points(np.array([*translation, rotation]), poses[:, :2])
     out[:, 2] = poses[:, 2] + rotation
     return out
 

@@ -20,6 +20,7 @@ correction, and only when enough distinct views on both sides support it.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 import logging
 import math
 
@@ -28,7 +29,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from vbn_common.geometry.frames import wrap_angle
+from vbn_common.geometry.frames import transform_points, wrap_angle
 from visibility_builder.estimation.rotations import matrix_to_quat, quat_yaw
 from visibility_builder.estimation.view_pairs import PairMotion
 
@@ -44,6 +45,7 @@ MIN_LINK_VIEWS = 3
 #: Agreement: a pair's rotation within this of the correction's (or three of its
 #: standard deviations), degrees; its bearing within ``DIRECTION_TOL_DEG``.
 ROTATION_TOL_DEG = 0.5
+DIRECTION_TOL_DEG = 1.5
 #: The agreeing pairs' bearings must spread this much (RMS, degrees): along parallel
 #: bearings (a corridor) the pairs do not fix the correction, and pairs through a wall
 #: between two look-alike posters join those through a door on one wrong correction.
@@ -51,7 +53,6 @@ MIN_SPREAD_DEG = 10.0
 #: A second correction agreed on by at least this share of the first's pairs (and by
 #: other pairs) makes the link ambiguous.
 RIVAL_SHARE = 0.4
-DIRECTION_TOL_DEG = 1.5
 
 
 def link_candidates(camera: np.ndarray, pieces: np.ndarray, radius_m: float,
@@ -71,31 +72,31 @@ def link_candidates(camera: np.ndarray, pieces: np.ndarray, radius_m: float,
         field_deg: The camera's horizontal field, degrees (360: panoramic).
     """
     ok = np.flatnonzero(np.isfinite(camera).all(axis=1))
-    out: set[tuple[int, int]] = set()
     labels = np.unique(pieces[ok])
     if len(labels) < 2:
         return []
-    trees = {int(p): (ok[pieces[ok] == p], cKDTree(camera[ok[pieces[ok] == p], :2]))
-             for p in labels}
-    for p, (members, _) in trees.items():
-        for q, (others, tree) in trees.items():
-            if q == p:
-                continue
-            dist, idx = tree.query(camera[members, :2], k=min(per_view, len(others)),
-                                   distance_upper_bound=radius_m)
-            dist, idx = dist.reshape(len(members), -1), idx.reshape(len(members), -1)
-            for row, i in enumerate(members):
-                for d, k in zip(dist[row], idx[row]):
-                    if not math.isfinite(d):
-                        continue
-                    j = int(others[k])
-                    if field_deg < 360.0 and abs(float(wrap_angle(
-                            camera[j, 2] - camera[i, 2]))) > math.radians(0.5 * field_deg):
-                        continue
-                    out.add((min(int(i), j), max(int(i), j)))
-    return sorted(out)
+    found = []
+    for q in labels:
+        others = ok[pieces[ok] == q]
+        members = ok[pieces[ok] != q]
+        dist, idx = cKDTree(camera[others, :2]).query(
+            camera[members, :2], k=min(per_view, len(others)), distance_upper_bound=radius_m)
+        dist, idx = dist.reshape(len(members), -1), idx.reshape(len(members), -1)
+        row, col = np.nonzero(np.isfinite(dist))
+        found.append(np.stack([members[row], others[idx[row, col]]], axis=1))
+    pairs = np.sort(np.concatenate(found), axis=1)
+    if field_deg < 360.0:
+        turn = np.abs(wrap_angle(camera[pairs[:, 1], 2] - camera[pairs[:, 0], 2]))
+        pairs = pairs[turn <= math.radians(0.5 * field_deg)]
+    return [(int(i), int(j)) for i, j in np.unique(pairs, axis=0)]
 
 
+def _moved(points: np.ndarray, rotation: float, translation: np.ndarray) -> np.ndarray:
+    """Return ``points`` turned by ``rotation`` about the origin, then translated."""
+    return transform_points(np.array([translation[0], translation[1], rotation]), points)
+
+
+@dataclass(frozen=True)
 class LinkBound:
     """How far the estimate can place one piece off another: what the odometry allows.
 
@@ -106,23 +107,22 @@ class LinkBound:
             the steps that join it to the other pieces).
     """
 
-    def __init__(self, turn: float, shift: float, anchors: np.ndarray) -> None:
-        self.turn = turn
-        self.shift = shift
-        self.anchors = anchors
+    turn: float
+    shift: float
+    anchors: np.ndarray
 
-    def size(self, link: LinkCorrection) -> float:
+    def size(self, rotation: float, translation: np.ndarray) -> float:
         """Return the correction's turn and shift as shares of the bound (the larger)."""
-        c, s = math.cos(link.rotation), math.sin(link.rotation)
-        moved = self.anchors @ np.array([[c, s], [-s, c]]) + link.translation - self.anchors
-        return max(abs(link.rotation) / self.turn,
+        moved = _moved(self.anchors, rotation, translation) - self.anchors
+        return max(abs(rotation) / self.turn,
                    float(np.min(np.linalg.norm(moved, axis=1))) / self.shift)
 
     def allows(self, rotation: float, translation: np.ndarray) -> bool:
         """Return whether the correction turns and moves the piece within the bound."""
-        return self.size(LinkCorrection(rotation, translation, np.zeros(0, np.int64))) <= 1.0
+        return self.size(rotation, translation) <= 1.0
 
 
+@dataclass(frozen=True)
 class LinkCorrection:
     """The rigid planar correction of one piece against another that pairs agree on.
 
@@ -132,10 +132,9 @@ class LinkCorrection:
         inliers: Indices (into the pairs judged) of the pairs that agree.
     """
 
-    def __init__(self, rotation: float, translation: np.ndarray, inliers: np.ndarray) -> None:
-        self.rotation = rotation
-        self.translation = translation
-        self.inliers = inliers
+    rotation: float
+    translation: np.ndarray
+    inliers: np.ndarray
 
 
 def _constraints(camera: np.ndarray, in_a: np.ndarray, pairs: list[PairMotion]
@@ -164,8 +163,7 @@ def _constraints(camera: np.ndarray, in_a: np.ndarray, pairs: list[PairMotion]
 def _agree(rotation: float, translation: np.ndarray, delta: np.ndarray, fixed: np.ndarray,
            moving: np.ndarray, ray: np.ndarray, rot_tol: np.ndarray) -> np.ndarray:
     rot_ok = np.abs(wrap_angle(delta - rotation)) <= rot_tol
-    c, s = math.cos(rotation), math.sin(rotation)
-    moved = moving @ np.array([[c, s], [-s, c]]) + translation - fixed
+    moved = _moved(moving, rotation, translation) - fixed
     angle = np.abs(wrap_angle(np.arctan2(moved[:, 1], moved[:, 0]) - ray))
     dir_ok = np.isnan(ray) | (angle <= math.radians(DIRECTION_TOL_DEG))
     return rot_ok & dir_ok
@@ -192,8 +190,7 @@ def _translation(rotation: float, fixed: np.ndarray, moving: np.ndarray, ray: np
     if use.sum() < 2:
         return None
     normal = np.stack([-np.sin(ray[use]), np.cos(ray[use])], axis=1)
-    c, s = math.cos(rotation), math.sin(rotation)
-    rhs = np.sum(normal * (fixed[use] - moving[use] @ np.array([[c, s], [-s, c]])), axis=1)
+    rhs = np.sum(normal * (fixed[use] - _moved(moving[use], rotation, np.zeros(2))), axis=1)
     if np.linalg.matrix_rank(normal, tol=1e-3) < 2:
         return None
     return np.linalg.lstsq(normal, rhs, rcond=None)[0]
@@ -279,7 +276,8 @@ def consensus(camera: np.ndarray, piece_a: np.ndarray, pairs: list[PairMotion],
         # Two corrections: the one the odometry finds far more likely, else neither.
         if bound is None:
             return None
-        ours, theirs = bound.size(best), bound.size(rival)
+        ours = bound.size(best.rotation, best.translation)
+        theirs = bound.size(rival.rotation, rival.translation)
         if theirs < 0.5 * ours:
             return rival
         return best if ours < 0.5 * theirs else None
@@ -296,17 +294,13 @@ def near_pairs(camera: np.ndarray, station: np.ndarray, radius_m: float, window:
     ok = np.flatnonzero(np.isfinite(camera).all(axis=1))
     if len(ok) < 2:
         return []
-    tree = cKDTree(camera[ok, :2])
-    out = []
-    for a, b in sorted(tree.query_pairs(radius_m, output_type='set')):
-        i, j = sorted((int(ok[a]), int(ok[b])))
-        if station[j] - station[i] <= window:
-            continue
-        if field_deg < 360.0 and abs(float(wrap_angle(camera[j, 2] - camera[i, 2]))) > \
-                math.radians(0.5 * field_deg):
-            continue
-        out.append((i, j))
-    return sorted(out)
+    pairs = np.sort(ok[cKDTree(camera[ok, :2]).query_pairs(radius_m, output_type='ndarray')],
+                    axis=1).reshape(-1, 2)
+    keep = station[pairs[:, 1]] - station[pairs[:, 0]] > window
+    if field_deg < 360.0:
+        turn = np.abs(wrap_angle(camera[pairs[:, 1], 2] - camera[pairs[:, 0], 2]))
+        keep &= turn <= math.radians(0.5 * field_deg)
+    return [(int(i), int(j)) for i, j in np.unique(pairs[keep], axis=0)]
 
 
 def join_pieces(camera: np.ndarray, pieces: np.ndarray, motions: list[PairMotion],

@@ -7,8 +7,9 @@ turn of wheel motion between two images 1.5 m apart. Judged by the straight line
 odometry's relative poses on the 0.75 m floor missed the truth by up to 13.6 of their
 standard deviations (43 cm on 1.5 m, 8.5 degrees), and their pull moved whole rooms
 by 8 to 12 cm. :func:`odometry_steps` integrates ``/odom`` between consecutive images:
-the path's length and its total turning set each step's standard deviations in
-:mod:`.pipeline` and :mod:`.refinement`.
+the path's length and its total turning set each step's standard deviations
+(:func:`step_stds`) in the fits (:mod:`.global_fit`), the bundle adjustment and the
+bound on joining pieces (:mod:`.linking`).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ import numpy as np
 from vbn_common import names
 from vbn_common.bags import open_bag
 from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.frames import wrap_angle
+from vbn_common.geometry.frames import quaternion_yaw, wrap_angle
 
 if TYPE_CHECKING:
     from visibility_builder.estimation.pipeline import EstimationSettings
@@ -74,9 +75,9 @@ def odometry_steps(bag: str | os.PathLike[str], stamps_ns: np.ndarray,
                 pose = getattr(msg.pose, 'pose', msg.pose)
                 q = pose.orientation
                 stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
-                yaw = np.arctan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y ** 2 + q.z ** 2))
                 samples.append((stamp or bag_ns, float(pose.position.x),
-                                float(pose.position.y), float(yaw)))
+                                float(pose.position.y),
+                                float(quaternion_yaw((q.x, q.y, q.z, q.w)))))
     except VbnCommonError as error:
         _LOG.warning('%s: odometry stream unreadable (%s); steps are the straight lines '
                      'between images', bag, error)

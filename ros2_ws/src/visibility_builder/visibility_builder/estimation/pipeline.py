@@ -318,8 +318,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     # The odometry predicts the motion of images near in time; the gates on the straight
     # lines (on the path driven, a drive through a door opened them: docs/estimation.md).
     along = np.concatenate([np.zeros((1, 2)), np.cumsum(straight_steps(odom_base), axis=0)])
-    moved, turned = along[:, 0], along[:, 1]
-    odo_turn_std = settings.odometry_turn_std * turned + settings.odometry_yaw_drift_std * moved
+    moved, odo_turn_std = along[:, 0], step_stds(along, settings)[1]   # differences used
     measure(first, 'first', odom_cam, odo_turn_std, moved)
     warnings: list[str] = []
     tilting = _tilting(measured, features, camera, settings) if settings.pairs.method is None \
