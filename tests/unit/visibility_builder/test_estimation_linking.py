@@ -16,6 +16,7 @@ from vbn_common.geometry.frames import compose_poses, invert_pose, transform_poi
 from visibility_builder.estimation.linking import (
     MIN_LINK_PAIRS,
     LinkBound,
+    colocated,
     consensus,
     join_pieces,
     link_bounds,
@@ -99,6 +100,52 @@ def test_a_look_alike_rival_is_refused_unless_the_odometry_tells_them_apart(two_
     tight = LinkBound(math.radians(1.0), 0.05, estimate[9:, :2])
     assert consensus(estimate, pieces == 0, right, np.random.default_rng(0),
                      bound=tight) is None
+
+
+def test_colocated_pairs_the_views_a_correction_puts_at_one_place() -> None:
+    camera = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0],        # piece A
+                       [2.1, 0.0, 0.5], [5.0, 5.0, 0.0], [1.9, 0.2, 0.0]])
+    piece_a = np.array([True, True, False, False, False])
+    # Moved 1 m back, view 2 lands 0.1 m from view 1; view 4 0.2 m from view 0's
+    # neighbour 1 too (0.9, 0.2): 0.22 m; view 3 far from both.
+    assert colocated(camera, piece_a, ~piece_a, 0.0, np.array([-1.0, 0.0])) == \
+        [(1, 2), (1, 4)]
+    # At most one check: the first of piece B's views in order.
+    assert colocated(camera, piece_a, ~piece_a, 0.0, np.array([-1.0, 0.0]), most=1) == \
+        [(1, 2)]
+    # A 90 degree camera: view 2 looks 29 degrees away from view 1, view 4 the same way.
+    assert colocated(camera, piece_a, ~piece_a, 0.0, np.array([-1.0, 0.0]),
+                     field_deg=40.0) == [(1, 4)]
+    assert colocated(camera, piece_a, ~piece_a, 0.0, np.array([5.0, 0.0])) == []
+
+
+def test_a_correction_that_stacks_views_seeing_different_scenes_is_refused(two_rooms
+                                                                             ) -> None:
+    truth, estimate, pieces = two_rooms
+    right = [_pair(i, j, truth) for i in (0, 3, 6) for j in (9, 12, 15)]
+    # A look-alike better supported than the truth: room B as if it stood turned by
+    # 20 degrees and 1.5 m lower, on room A.
+    ghost = truth.copy()
+    ghost[9:] = _rigid(truth[9:], math.radians(20.0), np.array([0.885, -1.52]))
+    rival = [_pair(i, j, ghost) for i in (0, 2, 6, 8) for j in (9, 11, 15)]
+    assert consensus(estimate, pieces == 0, right + rival, np.random.default_rng(0)) is None
+
+    def probe(pairs: list[tuple[int, int]]) -> list[PairMotion | None]:
+        # The world: views match when they truly stand within a metre of each other.
+        return [_pair(i, j, truth) if np.hypot(*(truth[i, :2] - truth[j, :2])) < 1.0
+                else None for i, j in pairs]
+
+    added = join_pieces(estimate, pieces, right + rival, seed=1, probe=probe)
+    assert {(p.i, p.j) for p in added} == {(p.i, p.j) for p in right}
+    # Views that do stand at one place and match do not refuse the truth.
+    stacked = truth.copy()
+    stacked[9:, 1] -= 1.5
+    moved = _rigid(stacked[9:], math.radians(4.0), np.array([0.1, -0.15]))
+    again = np.concatenate([estimate[:9], moved])
+    near = [_pair(i, j, stacked) for i in (0, 3, 6, 2) for j in (9, 12, 15)]
+    kept = join_pieces(again, pieces, near, seed=1,
+                       probe=lambda pairs: [_pair(i, j, stacked) for i, j in pairs])
+    assert len(kept) == len(near)
 
 
 def test_join_pieces_groups_pairs_by_the_pieces_they_join(two_rooms) -> None:

@@ -16,11 +16,16 @@ loop-closure checks in pose-graph SLAM do): every correct pair says the same thi
 the planar motion ``(rotation, translation)`` that moves piece B onto piece A, and a
 wrong pair says something else. :func:`link_candidates` proposes pairs between pieces
 near in the estimate, :func:`consensus` keeps the largest set that agrees on one
-correction, and only when enough distinct views on both sides support it.
+correction, and only when enough distinct views on both sides support it. A
+correction must also put no two views at one place that do not see the same scene
+(:func:`colocated`): the look-alike posters of two rooms agree on a wrong correction as
+well as a door does on the right one, and only the views it stacks on each other show it.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+import functools
 import logging
 import math
 
@@ -35,8 +40,8 @@ from visibility_builder.estimation.view_pairs import PairMotion
 
 _LOG = logging.getLogger(__name__)
 
-__all__ = ['MIN_LINK_PAIRS', 'LinkBound', 'LinkCorrection', 'consensus', 'join_pieces',
-           'link_bounds', 'link_candidates', 'near_pairs']
+__all__ = ['MIN_LINK_PAIRS', 'LinkBound', 'LinkCorrection', 'colocated', 'consensus',
+           'join_pieces', 'link_bounds', 'link_candidates', 'near_pairs']
 
 #: A correction between two pieces needs this many agreeing pairs, with at least
 #: ``MIN_LINK_VIEWS`` distinct views on each side.
@@ -53,6 +58,17 @@ MIN_SPREAD_DEG = 10.0
 #: A second correction agreed on by at least this share of the first's pairs (and by
 #: other pairs) makes the link ambiguous.
 RIVAL_SHARE = 0.4
+#: Views of two pieces this close once corrected stand at one place (closer than twice
+#: the distance a robot keeps from a wall, so no wall between them): they see one scene
+#: and must match, their rotation the correction's. At most ``COLOCATED_CHECKS`` such
+#: pairs are measured per correction; it is refused when at least
+#: ``MIN_CONTRADICTIONS`` and most of them contradict it.
+COLOCATED_M = 0.25
+COLOCATED_CHECKS = 12
+MIN_CONTRADICTIONS = 3
+
+#: Measures pairs ``(i, j)``, ``i < j``: a motion each, or None where they do not match.
+Probe = Callable[[list[tuple[int, int]]], list[PairMotion | None]]
 
 
 def link_candidates(camera: np.ndarray, pieces: np.ndarray, radius_m: float,
@@ -196,9 +212,56 @@ def _translation(rotation: float, fixed: np.ndarray, moving: np.ndarray, ray: np
     return np.linalg.lstsq(normal, rhs, rcond=None)[0]
 
 
+def colocated(camera: np.ndarray, piece_a: np.ndarray, piece_b: np.ndarray,
+              rotation: float, translation: np.ndarray, field_deg: float = 360.0,
+              radius_m: float = COLOCATED_M, most: int = COLOCATED_CHECKS
+              ) -> list[tuple[int, int]]:
+    """Return pairs ``(i, j)``, ``i < j``, of views the correction puts at one place.
+
+    Each view of piece B, corrected, with the nearest view of piece A within
+    ``radius_m`` (a camera that does not see all around: headings within half its
+    field); at most ``most`` of them, evenly through piece B's views.
+    """
+    a = np.flatnonzero(piece_a & np.isfinite(camera).all(axis=1))
+    b = np.flatnonzero(piece_b & np.isfinite(camera).all(axis=1))
+    if not len(a) or not len(b):
+        return []
+    moved = _moved(camera[b, :2], rotation, translation)
+    dist, near = cKDTree(camera[a, :2]).query(moved, distance_upper_bound=radius_m)
+    keep = np.isfinite(dist)
+    if field_deg < 360.0:
+        turn = wrap_angle(camera[b, 2] + rotation - camera[a[np.minimum(near, len(a) - 1)], 2])
+        keep &= np.abs(turn) <= math.radians(0.5 * field_deg)
+    rows = np.flatnonzero(keep)
+    rows = rows[np.unique(np.linspace(0, len(rows) - 1, min(most, len(rows))).astype(int))] \
+        if len(rows) else rows
+    pairs = np.sort(np.stack([a[near[rows]], b[rows]], axis=1), axis=1)
+    return [(int(i), int(j)) for i, j in pairs]
+
+
+def _contradicted(camera: np.ndarray, piece_a: np.ndarray, piece_b: np.ndarray,
+                  link: LinkCorrection, probe: Probe, field_deg: float) -> str:
+    """Return why the views the correction puts at one place refuse it, or ''."""
+    pairs = colocated(camera, piece_a, piece_b, link.rotation, link.translation, field_deg)
+    if not pairs:
+        return ''
+    found = [m for m in probe(pairs) if m is not None]
+    agree = 0
+    if found:
+        delta, _, _, _, std = _constraints(camera, piece_a[[m.i for m in found]], found)
+        tol = np.maximum(math.radians(ROTATION_TOL_DEG), 3.0 * std)
+        agree = int(np.sum(np.abs(wrap_angle(delta - link.rotation)) <= tol))
+    against = len(pairs) - agree
+    if against >= MIN_CONTRADICTIONS and against > 0.5 * len(pairs):
+        return f'{against} of {len(pairs)} views it puts at one place do not match'
+    return ''
+
+
 def consensus(camera: np.ndarray, piece_a: np.ndarray, pairs: list[PairMotion],
               rng: np.random.Generator, hypotheses: int = 300,
-              bound: LinkBound | None = None) -> LinkCorrection | None:
+              bound: LinkBound | None = None,
+              check: Callable[[LinkCorrection], str] | None = None
+              ) -> LinkCorrection | None:
     """Return the correction most pairs between two pieces agree on, or None.
 
     Hypotheses are drawn from two pairs whose rotations agree (RANSAC); the best is
@@ -218,6 +281,8 @@ def consensus(camera: np.ndarray, piece_a: np.ndarray, pairs: list[PairMotion],
         rng: Draws the hypotheses.
         hypotheses: How many.
         bound: How far the estimate can be off between the two pieces.
+        check: Why a correction is refused ('' when not; :func:`join_pieces` checks the
+            views it puts at one place); a refused one is neither kept nor a rival.
     """
     if len(pairs) < MIN_LINK_PAIRS:
         return None
@@ -240,7 +305,15 @@ def consensus(camera: np.ndarray, piece_a: np.ndarray, pairs: list[PairMotion],
         if agree.sum() >= MIN_LINK_PAIRS:
             found.append(agree)
 
+    checked: dict[bytes, LinkCorrection | None] = {}
+
     def refined(agree: np.ndarray) -> LinkCorrection | None:
+        key = agree.tobytes()
+        if key not in checked:
+            checked[key] = fitted(agree)
+        return checked[key]
+
+    def fitted(agree: np.ndarray) -> LinkCorrection | None:
         for _ in range(3):
             if agree.sum() < MIN_LINK_PAIRS:
                 return None
@@ -257,7 +330,13 @@ def consensus(camera: np.ndarray, piece_a: np.ndarray, pairs: list[PairMotion],
             return None
         if _spread(ray[agree]) < math.radians(MIN_SPREAD_DEG):
             return None
-        return LinkCorrection(rotation, translation, np.flatnonzero(agree))
+        link = LinkCorrection(rotation, translation, np.flatnonzero(agree))
+        why = '' if check is None else check(link)
+        if why:
+            _LOG.info('correction %.2f deg, %.2f m refused: %s', math.degrees(rotation),
+                      float(np.linalg.norm(translation)), why)
+            return None
+        return link
 
     found.sort(key=lambda agree: -int(agree.sum()))
     best = next((link for link in map(refined, found) if link is not None), None)
@@ -304,14 +383,16 @@ def near_pairs(camera: np.ndarray, station: np.ndarray, radius_m: float, window:
 
 
 def join_pieces(camera: np.ndarray, pieces: np.ndarray, motions: list[PairMotion],
-                seed: int, step_std: tuple[np.ndarray, np.ndarray] | None = None
-                ) -> list[PairMotion]:
+                seed: int, step_std: tuple[np.ndarray, np.ndarray] | None = None,
+                probe: Probe | None = None, field_deg: float = 360.0) -> list[PairMotion]:
     """Return the pairs of ``motions`` between two pieces that agree on one correction.
 
     The pairs are grouped by the two pieces they join; each group's :func:`consensus`
     keeps its agreeing pairs (none when too few agree), within the bound of
     :func:`link_bounds` when ``step_std`` (the odometry steps' displacement and turn
-    deviations between consecutive views) is given.
+    deviations between consecutive views) is given, and refusing a correction when
+    ``probe`` measures most of the views it puts at one place (:func:`colocated`) as
+    not matching or turned otherwise.
     """
     groups: dict[tuple[int, int], list[PairMotion]] = {}
     for motion in motions:
@@ -321,8 +402,10 @@ def join_pieces(camera: np.ndarray, pieces: np.ndarray, motions: list[PairMotion
     added = []
     for (a, b), group in sorted(groups.items()):
         bound = None if step_std is None else link_bounds(camera, pieces, a, b, *step_std)
+        check = None if probe is None else functools.partial(
+            _contradicted, camera, pieces == a, pieces == b, probe=probe, field_deg=field_deg)
         link = consensus(camera, pieces == a, group, np.random.default_rng([seed, a, b]),
-                         bound=bound)
+                         bound=bound, check=check)
         if link is None:
             continue
         _LOG.info('pieces %d and %d joined by %d of %d pairs (correction %.2f deg, %.2f m)',

@@ -278,7 +278,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     verdict: dict[tuple[int, int], str] = {}                          # why refused, or ''
     tried: dict[str, int] = {}
 
-    def raw(pairs: list[tuple[int, int]], name: str) -> None:
+    def raw(pairs: list[tuple[int, int]], name: str) -> list[PairMotion | None]:
         t0 = time.perf_counter()
         todo = [c for c in pairs if c not in seen]
         tried[name] = tried.get(name, 0) + len(todo)
@@ -287,6 +287,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                                         moved=bool(station[i] != station[j]))
             report(f'pairs ({name})', k + 1, len(todo))
         times[f'pairs ({name})'] = times.get(f'pairs ({name})', 0.0) + time.perf_counter() - t0
+        return [seen[c][0] for c in pairs]
 
     def measure(candidates: list[tuple[int, int]], name: str, reference: np.ndarray,
                 turn_std: np.ndarray, path: np.ndarray) -> None:
@@ -367,10 +368,10 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
                             {c for c in near_pairs(fit['camera'], station, settings.radius_m,
                                                    settings.window, field_deg)
                              if pieces[c[0]] != pieces[c[1]]})
-        raw(candidates, 'links')
         added = join_pieces(fit['camera'], pieces,
-                            [seen[c][0] for c in candidates if seen[c][0] is not None],
-                            settings.pairs.seed + round_, step_std)
+                            [m for m in raw(candidates, 'links') if m is not None],
+                            settings.pairs.seed + round_, step_std,
+                            lambda c: raw(c, 'one place'), field_deg)
         for c in candidates:
             verdict.setdefault(c, seen[c][1] or 'between pieces: no consensus')
         if not added:
