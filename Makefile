@@ -64,8 +64,8 @@ demo: setup
 # rendering is deterministic, so an unchanged renderer reproduces them byte for byte.
 SAMPLE_BAGS := \
   'room_exploration|--scene room --kind exploration --camera panoramic --spacing 0.25 --compressed --jpeg-quality 85' \
-  'room_run|--scene room --kind run --camera panoramic --speed 0.5 --seed 1 --exposure 0.08 --compressed --jpeg-quality 80' \
-  'room_run_kidnapped|--scene room --kind run-kidnapped --camera panoramic --speed 0.5 --seed 2 --exposure 0.08 --compressed --jpeg-quality 80' \
+  'room_run|--scene room --kind run --camera panoramic --speed 0.5 --seed 1 --path-seed 0 --exposure 0.08 --compressed --jpeg-quality 80' \
+  'room_run_kidnapped|--scene room --kind run-kidnapped --camera panoramic --speed 0.5 --seed 2 --path-seed 0 --exposure 0.08 --compressed --jpeg-quality 80' \
   'floor_exploration|--scene floor --kind exploration --camera panoramic --spacing 1.25 --compressed --jpeg-quality 85'
 # Larger bags, generated on demand into the ignored cache/ folder.
 CACHE_BAGS := \

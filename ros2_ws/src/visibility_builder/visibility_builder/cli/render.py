@@ -89,6 +89,21 @@ def register(subparsers: Any) -> None:
                              'base_link on /tf (the ground truth stays for judging)')
     parser.add_argument('--drift', type=float, default=1.0, metavar='SCALE',
                         help="multiplies the wheel odometry's errors (default 1; 0: none)")
+    parser.add_argument('--changes', default=None, metavar='FILE|random[:SEED]',
+                        help='the world changed since the exploration: a change set (JSON: '
+                             'furniture, posters rehung or taken down, light, people; see '
+                             'visibility_builder.synthesis.world_changes), or one drawn '
+                             'for the scene from SEED (default --seed)')
+    parser.add_argument('--light', default=None, metavar='GAIN[,SIDE_DEG,STRENGTH]',
+                        help="the light's gain (0.5 to 1.5 in the benchmark) and a light "
+                             'from direction SIDE_DEG of that strength (0 to 1)')
+    parser.add_argument('--people', type=int, default=None, metavar='N',
+                        help='people walking through the view (occluders that move)')
+    parser.add_argument('--save-changes', default=None, metavar='FILE',
+                        help='write the change set used to FILE (JSON)')
+    parser.add_argument('--path-seed', type=int, default=None, metavar='N',
+                        help="varies a run's path (default: --seed; 0: the scene's own "
+                             'path)')
     parser.add_argument('--snapshot', type=float, nargs=3, metavar=('X', 'Y', 'YAW'),
                         default=None,
                         help='write one image from pose (X, Y, YAW in degrees) as PNG to '
@@ -108,6 +123,47 @@ def _distortion(text: str) -> tuple[str, tuple[float, ...]]:
     if not model:
         raise argparse.ArgumentTypeError(f'expected MODEL:c1,c2,..., got {text!r}')
     return model, coefficients
+
+
+def _changes(args: argparse.Namespace, scene: Any) -> Any:
+    """Return the ``WorldChanges`` that ``--changes``, ``--light`` and ``--people`` give."""
+    import dataclasses
+
+    from visibility_builder.errors import VisibilityBuilderError
+    from visibility_builder.synthesis.world_changes import (
+        WorldChanges,
+        load_changes,
+        random_changes,
+    )
+
+    changes = None
+    if args.changes is not None:
+        kind, _, seed = args.changes.partition(':')
+        if kind == 'random':
+            try:
+                changes = random_changes(scene, int(seed) if seed else args.seed)
+            except ValueError:
+                raise VisibilityBuilderError(f'--changes random:SEED needs an integer seed, '
+                                             f'got {seed!r}') from None
+        else:
+            changes = load_changes(args.changes)
+    if args.light is None and args.people is None:
+        return changes
+    changes = changes or WorldChanges(seed=args.seed)
+    if args.light is not None:
+        try:
+            values = [float(v) for v in args.light.split(',')]
+        except ValueError:
+            values = []
+        if len(values) not in (1, 3):
+            raise VisibilityBuilderError(f'--light is GAIN or GAIN,SIDE_DEG,STRENGTH, got '
+                                         f'{args.light!r}')
+        side = values[1:] or [changes.appearance.side_deg, changes.appearance.side_strength]
+        changes = dataclasses.replace(changes, appearance=dataclasses.replace(
+            changes.appearance, gain=values[0], side_deg=side[0], side_strength=side[1]))
+    if args.people is not None:
+        changes = dataclasses.replace(changes, people=args.people)
+    return changes
 
 
 def run(args: argparse.Namespace) -> int:
@@ -137,12 +193,19 @@ def run(args: argparse.Namespace) -> int:
                    seed=args.seed, encoding=args.encoding, compression=args.compressed,
                    jpeg_quality=args.jpeg_quality, effects=effects,
                    run=RunParameters(max_speed=args.speed), duration=args.duration,
-                   odometry=args.odometry, drift=args.drift)
+                   odometry=args.odometry, drift=args.drift,
+                   changes=_changes(args, scene), path_seed=args.path_seed)
+    if args.save_changes is not None and spec.changes is not None:
+        from landmark_db.jsonio import write_json_atomic
+
+        write_json_atomic(spec.changes.to_dict(), args.save_changes, indent=1)
     if args.snapshot is not None:
         import cv2
 
         from vbn_common.geometry.mount import tilted
         from visibility_builder.render.lens_view import make_renderer
+        from visibility_builder.render.textures import build_wall_atlas
+        from visibility_builder.synthesis.people import walkers
 
         spec.check()
         x, y, yaw_deg = args.snapshot
@@ -152,9 +215,17 @@ def run(args: argparse.Namespace) -> int:
         if spec.camera_height is not None:
             scene = dataclasses.replace(scene, camera_height=spec.camera_height)
         camera = tilted(spec.camera_model(), spec.mount_tilt())
-        image = make_renderer(scene, camera).render(
-            pose, encoding=args.encoding, effects=effects,
-            rng=np.random.default_rng(args.seed)).image
+        changes = spec.changes
+        renderer = make_renderer(scene, camera) if changes is None else make_renderer(
+            changes.render_scene(scene), camera,
+            build_wall_atlas(changes.render_scene(scene), appearance=changes.appearance))
+        occluders = None if changes is None else changes.occluders(scene)
+        if changes is not None and changes.people:
+            occluders = occluders + walkers(changes.planning_scene(scene), changes.people,
+                                            changes.seed, 1.0).occluders(0.0)
+        image = renderer.render(pose, encoding=args.encoding, effects=effects,
+                                rng=np.random.default_rng(args.seed),
+                                occluders=occluders or None).image
         out = Path(args.out)
         if out.suffix.lower() != '.png':
             raise VisibilityBuilderError(f'snapshot output must be a .png file, got {out}')

@@ -8,11 +8,13 @@ are shared with the builder and the localizer: :mod:`vbn_common.geometry`.
 from __future__ import annotations
 
 from visibility_builder.render.effects import ImageEffects, apply_effects
-from visibility_builder.render.renderer import Renderer, Rendering, cast_rays
-from visibility_builder.render.textures import WallAtlas, build_wall_atlas
+from visibility_builder.render.renderer import Occluders, Renderer, Rendering, cast_rays
+from visibility_builder.render.textures import Appearance, WallAtlas, build_wall_atlas
 
 __all__ = [
+    'Appearance',
     'ImageEffects',
+    'Occluders',
     'Renderer',
     'Rendering',
     'WallAtlas',

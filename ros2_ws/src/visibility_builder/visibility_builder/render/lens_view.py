@@ -36,7 +36,7 @@ from vbn_common.geometry.camera import CameraModel, PanoramicCamera, PinholeCame
 from vbn_common.geometry.mount import TiltedCamera
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects, apply_effects
-from visibility_builder.render.renderer import Renderer, Rendering
+from visibility_builder.render.renderer import Occluders, Renderer, Rendering
 from visibility_builder.render.textures import WallAtlas
 
 __all__ = ['MAX_ELEVATION_DEG', 'LensRenderer', 'make_renderer']
@@ -140,7 +140,8 @@ class LensRenderer:
 
     def render(self, pose: np.ndarray, *, encoding: str = 'bgr8',
                effects: ImageEffects | None = None, rng: np.random.Generator | None = None,
-               with_points: bool = False, tilt: np.ndarray | None = None) -> Rendering:
+               with_points: bool = False, tilt: np.ndarray | None = None,
+               occluders: Occluders | None = None) -> Rendering:
         """Render the target camera's image from ``pose`` (as :meth:`Renderer.render`).
 
         ``tilt``: this frame's own tilt of the lens (:mod:`vbn_common.geometry.mount`),
@@ -149,7 +150,8 @@ class LensRenderer:
         """
         map_x, map_y = (self._map_x, self._map_y) if tilt is None else \
             self._maps(self._lens_rays @ np.asarray(tilt, float).reshape(3, 3).T)
-        source = self.inner.render(pose, encoding=encoding, with_points=with_points)
+        source = self.inner.render(pose, encoding=encoding, with_points=with_points,
+                                   occluders=occluders)
         # Past the source's last row or column: the nearest (a panorama's projection
         # already wraps its columns; rows past the top and bottom are ceiling and floor).
         image = cv2.remap(source.image, map_x, map_y, cv2.INTER_LINEAR,

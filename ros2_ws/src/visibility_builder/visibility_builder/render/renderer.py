@@ -19,6 +19,13 @@ column for both camera models (:mod:`vbn_common.geometry.camera`), so rendering 
 The floor and ceiling are flat-shaded by distance (featureless on purpose: the
 ground truth of :meth:`Renderer.pixel_to_wall_point` covers walls only). The same
 ray cast gives the ground truth: the 3-D point each pixel shows.
+
+:class:`Occluders` are what a world holds beyond its walls (issue 18): furniture lower
+than the walls and people walking through the view, as vertical faces with a top
+height and a colour. A second ray cast against them paints, over the walls, the pixels
+where the nearest of them stands in front of the wall and below its top (one layer:
+what an occluder hides of another behind it is drawn as wall). They are not walls of
+the map: the ground truth shows no wall point there.
 """
 from __future__ import annotations
 
@@ -34,7 +41,7 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects, apply_effects
 from visibility_builder.render.textures import WallAtlas, build_wall_atlas
 
-__all__ = ['Renderer', 'Rendering', 'cast_rays']
+__all__ = ['Occluders', 'Renderer', 'Rendering', 'cast_rays']
 
 _FLOOR_BGR = np.array([62.0, 84.0, 104.0], np.float32)
 _CEILING_BGR = np.array([228.0, 230.0, 232.0], np.float32)
@@ -71,6 +78,44 @@ def cast_rays(origin: np.ndarray, angles: np.ndarray, starts: np.ndarray,
     s_hit = np.where(np.isfinite(rho), s[rows, segment], 0.0)
     segment = np.where(np.isfinite(rho), segment, -1)
     return rho, segment, s_hit
+
+
+@dataclass(frozen=True)
+class Occluders:
+    """Vertical faces in front of the walls, each up to its own height.
+
+    Attributes:
+        starts: ``(o, 2)`` face start points in ``map``, metres.
+        ends: ``(o, 2)`` face end points.
+        tops: ``(o,)`` heights of their top edges above the floor, metres.
+        colours: ``(o, 3)`` BGR colours (shaded by a cloth-like weave when drawn).
+    """
+
+    starts: np.ndarray
+    ends: np.ndarray
+    tops: np.ndarray
+    colours: np.ndarray
+
+    @staticmethod
+    def boxes(footprints: list[np.ndarray], tops: list[float],
+              colours: list[tuple[float, float, float]]) -> Occluders:
+        """Return the faces of upright prisms on ``(m, 2)`` footprint polygons."""
+        starts = [np.asarray(f, float) for f in footprints]
+        ends = [np.roll(f, -1, axis=0) for f in starts]
+        count = [len(f) for f in starts]
+        if not starts:
+            return Occluders(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3)))
+        return Occluders(np.concatenate(starts), np.concatenate(ends),
+                         np.repeat(np.asarray(tops, float), count),
+                         np.repeat(np.asarray(colours, float).reshape(-1, 3), count, axis=0))
+
+    def __add__(self, other: Occluders) -> Occluders:
+        return Occluders(*(np.concatenate([a, b]) for a, b in
+                           zip((self.starts, self.ends, self.tops, self.colours),
+                               (other.starts, other.ends, other.tops, other.colours))))
+
+    def __len__(self) -> int:
+        return len(self.tops)
 
 
 @dataclass(frozen=True)
@@ -131,7 +176,7 @@ class Renderer:
         floor = _FLOOR_BGR[None, None, :] * (0.55 + 0.45 * np.exp(-floor_range / 5.0))[..., None]
         ceiling = _CEILING_BGR[None, None, :] * (
             0.8 + 0.2 * np.exp(-ceiling_range / 5.0))[..., None]
-        image = np.where((self._k > 0)[..., None], floor, ceiling)
+        image = np.where((self._k > 0)[..., None], floor, ceiling) * self.atlas.gain
         return np.clip(image, 0, 255).astype(np.uint8)
 
     def cast(self, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -141,7 +186,7 @@ class Renderer:
 
     def render(self, pose: np.ndarray, *, encoding: str = 'bgr8',
                effects: ImageEffects | None = None, rng: np.random.Generator | None = None,
-               with_points: bool = False) -> Rendering:
+               with_points: bool = False, occluders: Occluders | None = None) -> Rendering:
         """Render the image the camera sees from robot pose ``pose``.
 
         Args:
@@ -150,6 +195,7 @@ class Renderer:
             effects: per-frame photometric effects, drawn from ``rng``.
             rng: generator for ``effects`` (required when they are active).
             with_points: also return the per-pixel ground-truth wall points.
+            occluders: furniture and people in front of the walls (module docstring).
 
         Returns:
             The :class:`Rendering`.
@@ -206,6 +252,9 @@ class Renderer:
         image = background.copy()
         mask = np.broadcast_to(wall[..., None], shape=image.shape) if not mono else wall
         np.copyto(image, (mixed + 0.5).astype(np.uint8), where=mask)
+        if occluders is not None and len(occluders):
+            covered = self._occlude(image, x, y, ray, np.where(hit, rho, np.inf), occluders)
+            wall &= ~covered
         if effects is not None and effects.active:
             if rng is None:
                 raise VisibilityBuilderError('image effects need a random generator')
@@ -214,6 +263,31 @@ class Renderer:
         if with_points:
             points = self._wall_points(x, y, ray, rho, z, wall)
         return Rendering(image, rho, segment, points)
+
+    def _occlude(self, image: np.ndarray, x: float, y: float, ray: np.ndarray,
+                 rho: np.ndarray, occluders: Occluders) -> np.ndarray:
+        """Paint the occluders in front of the walls; return the pixels they cover."""
+        o_rho, o_seg, o_s = cast_rays(np.array([x, y]), ray, occluders.starts, occluders.ends)
+        seg = np.where(o_seg >= 0, o_seg, 0)
+        near = (o_seg >= 0) & (o_rho < rho)
+        far = np.where(near, o_rho, 1e6).astype(np.float32)
+        z = self.scene.camera_height - self._k * far[None, :]
+        covered = near[None, :] & (z >= 0.0) & (z <= occluders.tops[seg][None, :])
+        if not covered.any():
+            return covered
+        edge = occluders.ends[seg] - occluders.starts[seg]
+        length = np.linalg.norm(edge, axis=1)
+        normal = np.stack([-edge[:, 1], edge[:, 0]], axis=1) / np.maximum(length, 1e-9)[:, None]
+        shade = 0.55 + 0.45 * np.abs(np.cos(ray) * normal[:, 0] + np.sin(ray) * normal[:, 1])
+        # A weave: stripes along the face and across it, a few centimetres wide.
+        arc = (o_s * length)[None, :]
+        weave = 0.85 + 0.15 * np.sin(arc * 40.0) * np.cos(z * 55.0)
+        light = (shade[None, :] * weave * self.atlas.gain)[..., None]
+        colour = np.clip(occluders.colours[seg][None, :, :] * light, 0, 255)
+        if image.ndim == 2:
+            colour = colour @ np.array([0.114, 0.587, 0.299])
+        image[covered] = (colour[covered] + 0.5).astype(np.uint8)
+        return covered
 
     def _wall_points(self, x: float, y: float, ray: np.ndarray, rho: np.ndarray,
                      z: np.ndarray, wall: np.ndarray) -> np.ndarray:

@@ -31,8 +31,8 @@ import numpy as np
 
 from landmark_db.scene import Scene
 
-__all__ = ['WallAtlas', 'build_wall_atlas', 'procedural_poster', 'sample_photographs',
-           'visible_side_flip']
+__all__ = ['Appearance', 'WallAtlas', 'build_wall_atlas', 'procedural_poster',
+           'sample_photographs', 'visible_side_flip']
 
 _LOG = logging.getLogger(__name__)
 
@@ -174,9 +174,48 @@ def _plaster(rng: np.random.Generator, width: int, height: int, tpm: float) -> n
     return np.clip(wall, 0, 255).astype(np.uint8)
 
 
+@dataclass(frozen=True)
+class Appearance:
+    """How the walls look on the day of a recording (a world that changed, issue 18).
+
+    The default is the scene as explored. Light: every wall's shade is multiplied by
+    ``gain`` and by ``1 + side_strength * cos(angle between the wall's normal and the
+    direction side_deg)`` (at least 0.2): windows or lamps on one side. Posters: the
+    walls in ``rehung`` get other posters at other places (drawn with ``seed``), those
+    in ``bare`` none; their paint, tiles and bricks stay.
+
+    Attributes:
+        gain: Global light gain (0.5 to 1.5 in the benchmark).
+        side_deg: Direction the side light comes from, degrees in ``map``.
+        side_strength: Its strength (0: none).
+        rehung: Wall segment indices whose posters are replaced and moved.
+        bare: Wall segment indices whose posters are taken down.
+        seed: Seeds the rehung posters.
+    """
+
+    gain: float = 1.0
+    side_deg: float = 0.0
+    side_strength: float = 0.0
+    rehung: tuple[int, ...] = ()
+    bare: tuple[int, ...] = ()
+    seed: int = 1
+
+    def shade(self, normals: np.ndarray) -> np.ndarray:
+        """Return each wall's light factor from its free-side unit normal ``(s, 2)``."""
+        base = 0.82 + 0.18 * (normals @ np.array([math.cos(0.7), math.sin(0.7)]))
+        side = np.array([math.cos(math.radians(self.side_deg)),
+                         math.sin(math.radians(self.side_deg))])
+        return self.gain * base * np.maximum(0.2, 1.0 + self.side_strength * (normals @ side))
+
+
 def _wall_texture(rng: np.random.Generator, length: float, wall_height: float,
-                  tpm: float) -> np.ndarray:
-    """Compose one wall's texture: ``(rows, cols, 3)``, row 0 at the top of the wall."""
+                  tpm: float, posters: np.random.Generator | None = None,
+                  bare: bool = False) -> np.ndarray:
+    """Compose one wall's texture: ``(rows, cols, 3)``, row 0 at the top of the wall.
+
+    ``posters``: draw the posters from this generator instead of ``rng`` (rehung);
+    ``bare``: no posters.
+    """
     cols = max(1, int(math.ceil(length * tpm)))
     rows = max(1, int(math.ceil(wall_height * tpm)))
     wall = _plaster(rng, cols, rows, tpm)
@@ -212,6 +251,9 @@ def _wall_texture(rng: np.random.Generator, length: float, wall_height: float,
         y0 = max(0, y1 - band.shape[0])
         wall[y0:y1] = band[band.shape[0] - (y1 - y0):]
 
+    if bare:
+        return wall
+    rng = rng if posters is None else posters
     photos = sample_photographs()
     x = float(rng.uniform(0.05, 0.4))
     while x < length - 0.15:
@@ -273,6 +315,7 @@ class WallAtlas:
         lengths: ``(s,)`` wall lengths, metres.
         flip: ``(s,)`` texture direction per wall (see :func:`visible_side_flip`).
         extents: ``(s, 2)`` texel width and height of each wall's texture.
+        gain: The light's global gain (the floor and ceiling follow it).
     """
 
     levels: list[np.ndarray]
@@ -284,6 +327,7 @@ class WallAtlas:
     lengths: np.ndarray
     flip: np.ndarray
     extents: np.ndarray
+    gain: float = 1.0
     _gray: np.ndarray | None = field(default=None, repr=False)
 
     def gray_mip(self) -> np.ndarray:
@@ -294,13 +338,14 @@ class WallAtlas:
 
 
 def build_wall_atlas(scene: Scene, texels_per_metre: float = 160.0,
-                     n_levels: int = 6) -> WallAtlas:
+                     n_levels: int = 6, appearance: Appearance | None = None) -> WallAtlas:
     """Build every wall's texture from ``scene.texture_seed`` and pack them.
 
     Args:
         scene: the scene; its ``texture_seed`` and each wall's index seed the wall.
         texels_per_metre: level-0 resolution (reduced automatically for very long walls).
         n_levels: number of pyramid levels.
+        appearance: light and posters of the day (default: as explored).
 
     Returns:
         The atlas. Deterministic for a given scene and arguments.
@@ -318,13 +363,17 @@ def build_wall_atlas(scene: Scene, texels_per_metre: float = 160.0,
     normals = np.stack([-(ends - starts)[:, 1], (ends - starts)[:, 0]], 1) / np.maximum(
         lengths[:, None], 1e-12)
     normals[~flip] *= -1.0
-    light = np.array([math.cos(0.7), math.sin(0.7)])
+    appearance = appearance or Appearance()
+    shades = appearance.shade(normals)
     textures = []
     for j in range(len(lengths)):
         rng = np.random.default_rng([scene.texture_seed, j])
-        texture = _wall_texture(rng, float(lengths[j]), scene.wall_height, tpm)
-        shade = 0.82 + 0.18 * float(normals[j] @ light)
-        textures.append(np.clip(texture.astype(np.float32) * shade, 0, 255).astype(np.uint8))
+        posters = np.random.default_rng([scene.texture_seed, j, appearance.seed]) \
+            if j in appearance.rehung else None
+        texture = _wall_texture(rng, float(lengths[j]), scene.wall_height, tpm, posters,
+                                j in appearance.bare)
+        textures.append(np.clip(texture.astype(np.float32) * float(shades[j]), 0, 255)
+                        .astype(np.uint8))
     # Pack into strips: each wall padded (edge replicated) and aligned to `align`.
     tex_rows = textures[0].shape[0]
     strip_h = _round_up(tex_rows + 2 * pad, align)
@@ -356,7 +405,7 @@ def build_wall_atlas(scene: Scene, texels_per_metre: float = 160.0,
         mip[row:row + level.shape[0], :level.shape[1]] = level
     extents = np.array([[t.shape[1], t.shape[0]] for t in textures], dtype=float)
     return WallAtlas(levels, mip, mip_rows, tpm, scene.wall_height, origins, lengths, flip,
-                     extents)
+                     extents, appearance.gain)
 
 
 def _round_up(value: int, multiple: int) -> int:

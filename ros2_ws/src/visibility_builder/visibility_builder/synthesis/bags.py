@@ -57,6 +57,7 @@ from vbn_common.geometry.mount import tilt_matrix, tilted
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.render.effects import ImageEffects
 from visibility_builder.render.lens_view import make_renderer
+from visibility_builder.render.textures import build_wall_atlas
 from visibility_builder.synthesis import messages
 from visibility_builder.synthesis.exploration_drive import (
     DrivenExploration,
@@ -65,12 +66,14 @@ from visibility_builder.synthesis.exploration_drive import (
 )
 from visibility_builder.synthesis.grid import exploration_poses
 from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
+from visibility_builder.synthesis.people import walkers
 from visibility_builder.synthesis.trajectory import (
     RunParameters,
     Trajectory,
     kidnapped_trajectory,
     run_trajectory,
 )
+from visibility_builder.synthesis.world_changes import WorldChanges
 
 __all__ = ['KINDS', 'START_NS', 'BagSpec', 'BagSummary', 'write_bag']
 
@@ -121,6 +124,9 @@ class BagSpec:
         odometry: an exploration driven between its positions, with wheel odometry
             (:mod:`.exploration_drive`), instead of images placed at them.
         drift: multiplies every error of ``odometry_noise`` (0: perfect odometry).
+        changes: the world on the day of the recording, when it changed after the
+            exploration (:mod:`.world_changes`: furniture, posters, light, people).
+        path_seed: varies a run's path (None: ``seed``; 0: the scene's own path).
     """
 
     kind: str = 'exploration'
@@ -146,6 +152,8 @@ class BagSpec:
     odometry_noise: OdometryNoise = field(default_factory=OdometryNoise)
     odometry: bool = False
     drift: float = 1.0
+    changes: WorldChanges | None = None
+    path_seed: int | None = None
 
     def check(self) -> None:
         """Raise :class:`VisibilityBuilderError` for an invalid field."""
@@ -303,6 +311,10 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
     camera = tilted(spec.camera_model(), spec.mount_tilt())
     if spec.camera_height is not None:
         scene = replace(scene, camera_height=float(spec.camera_height))
+    changes = spec.changes or WorldChanges()
+    changes.check(scene)
+    # The robot goes round the furniture; the renderer draws the new walls.
+    drawn, scene = changes.render_scene(scene), changes.planning_scene(scene)
     # Plan before opening the bag: bad input must leave nothing behind.
     driven = None
     if spec.kind == 'exploration' and spec.odometry:
@@ -315,12 +327,21 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
         frames = list(_camera_frames(spec, scene))
         trajectory = None
     else:
-        trajectory = run_trajectory(scene, spec.run, spec.duration)
+        trajectory = run_trajectory(scene, spec.run, spec.duration,
+                                    spec.seed if spec.path_seed is None else spec.path_seed)
         if spec.kind == 'run-kidnapped':
             trajectory = kidnapped_trajectory(trajectory)
         frames = []
     vibration = float(spec.vibration_deg)
-    renderer = make_renderer(scene, camera, margin_deg=4.0 * vibration)
+    atlas = None if spec.changes is None else build_wall_atlas(drawn,
+                                                               appearance=changes.appearance)
+    renderer = make_renderer(drawn, camera, atlas, margin_deg=4.0 * vibration)
+    furniture = changes.occluders(scene)
+    people = None
+    if changes.people:
+        last = trajectory.duration if trajectory is not None else \
+            (frames[-1][0] - START_NS) / 1e9 if frames else 0.0
+        people = walkers(scene, changes.people, changes.seed, last + 1.0)
     mount = np.eye(3) if spec.mount_tilt() is None else spec.mount_tilt()
     info = camera.camera_info()
     with BagWriter(out) as writer:
@@ -337,8 +358,10 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
                     0.0, vibration, 2), -4.0 * vibration, 4.0 * vibration)
                 shake = tilt_matrix(float(pitch), float(roll))
             own = {} if shake is None else {'tilt': shake @ mount}   # a lens renderer's
+            around = furniture if people is None else \
+                furniture + people.occluders((stamp - START_NS) / 1e9)
             image = renderer.render(pose, encoding=spec.encoding, effects=spec.effects, rng=rng,
-                                    **own).image
+                                    occluders=around if len(around) else None, **own).image
             if spec.compression is None:
                 message = messages.image_message(stamp, image)
             else:

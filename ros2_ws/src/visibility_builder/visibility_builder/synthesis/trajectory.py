@@ -11,6 +11,10 @@ kernel (weaker where smoothing would bring it closer than ``clearance`` to a
 wall) and timed with speed limited by ``max_speed``, by ``max_turn_rate`` over
 the curvature and by ``max_accel``; the heading follows the path's tangent.
 
+Another path seed gives another day's run through the same scene (the loop at
+another distance from the walls, through more or fewer waypoints, from another start,
+either way round, and another pass through the middle); seed 0 is the scene's own.
+
 The kidnapped variant drives the first half of a run and is then carried (no
 wheel motion) to the pose of the run's first half that is furthest away, from
 which it drives on along the run for the remaining time.
@@ -148,21 +152,31 @@ def lattice_graph(scene: Scene, params: RunParameters) -> tuple[np.ndarray, np.n
 
 
 def _waypoints(scene: Scene, nodes: np.ndarray, clearance: np.ndarray,
-               params: RunParameters) -> list[int]:
+               params: RunParameters, path_seed: int = 0) -> list[int]:
     centroid = nodes.mean(axis=0)
     outer = Scene(scene.perimeter).wall_distance(nodes)  # distance to the outer walls
-    ring = np.flatnonzero(np.abs(outer - params.near_wall) <= params.lattice / 2
-                          + 1e-9)
-    if ring.size < params.waypoints:
-        ring = np.argsort(np.abs(outer - params.near_wall))[:max(params.waypoints, 2)]
+    near_wall, count = params.near_wall, params.waypoints
+    rng = np.random.default_rng([path_seed, 4]) if path_seed else None
+    if rng is not None:   # another day's run: another loop, another way round
+        near_wall *= float(rng.uniform(0.8, 1.6))
+        count = max(3, count + int(rng.integers(-2, 3)))
+    ring = np.flatnonzero(np.abs(outer - near_wall) <= params.lattice / 2 + 1e-9)
+    if ring.size < count:
+        ring = np.argsort(np.abs(outer - near_wall))[:max(count, 2)]
     angle = np.arctan2(nodes[ring, 1] - centroid[1], nodes[ring, 0] - centroid[0])
     order = ring[np.argsort(angle)]
-    picks = order[np.linspace(0, order.size, params.waypoints, endpoint=False).astype(int)]
+    if rng is not None:
+        order = np.roll(order, int(rng.integers(0, order.size)))
+        order = order[::-1] if rng.uniform() < 0.5 else order
+    picks = order[np.linspace(0, order.size, count, endpoint=False).astype(int)]
     loop = [int(p) for p in picks] + [int(picks[0])]
     open_nodes = np.flatnonzero(clearance >= 0.8 * clearance.max())
     pts = nodes[open_nodes]
     dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
     i, j = np.unravel_index(np.argmax(dist), dist.shape)
+    if rng is not None:   # a pass through the middle between two far open places
+        far = np.argwhere(dist >= 0.6 * dist.max())
+        i, j = far[int(rng.integers(0, len(far)))]
     # Enter the middle pass at the end nearer to where the loop closed.
     a, b = int(open_nodes[i]), int(open_nodes[j])
     if np.linalg.norm(nodes[b] - nodes[loop[-1]]) < np.linalg.norm(nodes[a] - nodes[loop[-1]]):
@@ -258,15 +272,19 @@ def _integrate(start: np.ndarray, v: np.ndarray, omega: np.ndarray, dt: float) -
 
 
 def run_trajectory(scene: Scene, params: RunParameters | None = None,
-                   duration: float | None = None) -> Trajectory:
+                   duration: float | None = None, path_seed: int = 0) -> Trajectory:
     """Plan and time a run through ``scene`` (see the module docstring).
 
-    The run is deterministic: it depends only on the scene and ``params``.
+    The run is deterministic: it depends only on the scene, ``params`` and
+    ``path_seed``.
 
     Args:
         scene: the scene.
         params: planning and timing parameters.
         duration: cut the run after this many seconds (``None``: the whole run).
+        path_seed: 0: the scene's own path; another: a loop at another distance from
+            the walls (0.8 to 1.6 times), through more or fewer waypoints, from another
+            start, either way round, and another pass through the middle.
 
     Returns:
         The ground-truth trajectory, starting at rest.
@@ -276,7 +294,7 @@ def run_trajectory(scene: Scene, params: RunParameters | None = None,
     """
     params = params or RunParameters()
     nodes, clearance, graph = lattice_graph(scene, params)
-    waypoints = _waypoints(scene, nodes, clearance, params)
+    waypoints = _waypoints(scene, nodes, clearance, params, path_seed)
     polyline = _plan(nodes, graph, waypoints)
     if np.sum(np.linalg.norm(np.diff(polyline, axis=0), axis=1)) < 2 * params.lattice:
         raise VisibilityBuilderError('the scene is too small for a run')
