@@ -27,6 +27,7 @@ setup(
         'vbn.commands': [
             'localize = landmark_localizer.cli.localize:register',
             'bench-localize = landmark_localizer.cli.bench_localize:register',
+            'bench-integrity = landmark_localizer.cli.bench_integrity:register',
             'demo = landmark_localizer.cli.demo:register',
         ],
     },

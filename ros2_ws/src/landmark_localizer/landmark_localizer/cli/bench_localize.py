@@ -58,8 +58,8 @@ from typing import Any
 __all__ = ['register', 'run']
 
 _RENDER_EFFECTS = ['render', '--scene', 'room', '--kind', 'run', '--camera', 'panoramic',
-                   '--speed', '0.5', '--seed', '3', '--path-seed', '0', '--exposure', '0.15', '--blur', '1.0',
-                   '--noise', '4', '--compressed', '--jpeg-quality', '80']
+                   '--speed', '0.5', '--seed', '3', '--path-seed', '0', '--exposure', '0.15',
+                   '--blur', '1.0', '--noise', '4', '--compressed', '--jpeg-quality', '80']
 
 
 def register(subparsers: Any) -> None:

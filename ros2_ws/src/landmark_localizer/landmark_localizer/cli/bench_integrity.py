@@ -1,0 +1,192 @@
+r"""``vbn bench-integrity``: never a confident wrong pose, in worlds that changed (issue 18).
+
+Example::
+
+    vbn bench-integrity --out out/bench_integrity --scenes room,hall --seeds 1,2
+
+Per scene (``room``, ``hall``: an L-shaped hall drawn per seed, ``floor``: the 25 cm
+floor, long) the database is built from its exploration as it was (``bags/`` for the
+room, else rendered into ``--out``), then each run of
+:data:`landmark_localizer.bench.worlds.RUNS` is rendered (a path per seed; the world
+unchanged, changed, dim, bright, with people, kidnapped) and localized in this process
+with no initial pose. Per run it prints frames posed, translation median and p95,
+poses more than 50 cm off, the share of poses within 3 sigma of their covariance
+(position ellipse and heading), start-up and recovery frames
+(:mod:`landmark_localizer.bench.integrity`), against the issue's targets: no pose 50 cm
+off, 99 % within 3 sigma over all runs, start-up and recovery within 3 frames, and in
+the changed worlds 95 % posed and p95 5 cm. Writes ``results.json``; exits 0 when
+every target is met, 1 otherwise.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+import subprocess
+import sys
+from typing import Any
+
+__all__ = ['register', 'run']
+
+
+def register(subparsers: Any) -> None:
+    """Add the ``bench-integrity`` subcommand."""
+    parser = subparsers.add_parser(
+        'bench-integrity', help='integrity of the poses (within 3 sigma, none 50 cm off), '
+                                'start-up and recovery, in worlds that changed',
+        description="Build each scene's database from its exploration, render runs on "
+                    'other days (unchanged, changed, dim, bright, with people, kidnapped) '
+                    'and localize them; print the integrity figures against the targets.')
+    parser.add_argument('--out', default='out/bench_integrity', help='output directory')
+    parser.add_argument('--scenes', default='room,hall',
+                        help='comma-separated: room, hall, floor (default room,hall)')
+    parser.add_argument('--seeds', default='1,2', help='comma-separated seeds (default 1,2)')
+    parser.add_argument('--runs', default=None,
+                        help='comma-separated subset of unchanged, changed, dim, bright, '
+                             'people, kidnapped (default all)')
+    parser.add_argument('--set', dest='settings', action='append', default=[],
+                        metavar='NAME=VALUE', help='localizer setting (repeatable)')
+    parser.set_defaults(func=run)
+
+
+def _vbn(argv: list[str], log: Path) -> None:
+    from landmark_localizer.errors import LocalizerError
+
+    print(f'$ vbn {" ".join(argv)}', flush=True)
+    with log.open('a') as stream:
+        stream.write(f'\n$ vbn {" ".join(argv)}\n')
+        stream.flush()
+        result = subprocess.run([sys.executable, '-m', 'landmark_db.cli.main', *argv],
+                                stdout=stream, stderr=stream, check=False)
+    if result.returncode != 0:
+        raise LocalizerError(f'vbn {argv[0]} failed (exit {result.returncode}); see {log}')
+
+
+def _scene_arg(scene: str, seed: int, out: Path) -> str:
+    """Return ``--scene``'s argument: a shipped name, or the hall's JSON written here."""
+    if scene != 'hall':
+        return scene
+    from landmark_db.jsonio import write_json_atomic
+    from landmark_localizer.bench.worlds import hall_scene
+
+    path = out / f'hall{seed}.json'
+    if not path.exists():
+        write_json_atomic(hall_scene(seed), path, indent=1)
+    return str(path)
+
+
+def _database(scene: str, seed: int, out: Path, log: Path) -> Path:
+    """Return the scene's database, rendering its exploration and building it if missing."""
+    key = f'hall{seed}' if scene == 'hall' else scene
+    db = out / f'{key}.db'
+    if db.exists():
+        return db
+    shipped = {'room': Path('bags/room_exploration')}.get(scene)
+    bag = shipped if shipped is not None and shipped.exists() else \
+        out / 'bags' / f'{key}_exploration'
+    if not bag.exists():
+        bag.parent.mkdir(parents=True, exist_ok=True)
+        _vbn(['render', '--scene', _scene_arg(scene, seed, out), '--kind', 'exploration',
+              '--compressed', '--out', str(bag)], log)
+    _vbn(['build', str(bag), '--db', str(db), '--quiet'], log)
+    return db
+
+
+def _localize(db: Path, bag: Path, settings: list[str]) -> Any:
+    import numpy as np
+
+    from landmark_db.cli.assignments import parse_assignments
+    from landmark_db.database.store import open_database
+    from landmark_localizer.bench.integrity import integrity_figures
+    from landmark_localizer.bench.offline import localize_run
+    from landmark_localizer.bench.pose_bags import read_run_bag
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.localizer import Localizer
+
+    run = read_run_bag(bag)
+    config = LocalizerConfig().with_values(parse_assignments(settings))
+    result = localize_run(Localizer(open_database(db), config), run)
+    poses = np.array([e.pose if e.pose is not None else np.full(3, np.nan)
+                      for e in result.estimates])
+    cov = np.array([e.covariance if e.covariance is not None else np.full((3, 3), np.nan)
+                    for e in result.estimates])
+    return integrity_figures(run.stamps_ns, poses, cov, run.truth_stamps_ns, run.truth_poses)
+
+
+def _failures(figures: dict[str, Any], goals: dict[str, float]) -> list[str]:
+    bad = []
+    for key, goal in goals.items():
+        value = figures[key]
+        if key == 'recovery':
+            worst = max((math.inf if r is None else r) for r in value) if value else math.inf
+            if worst > goal:
+                bad.append(f'recovery {worst} > {goal:g} frames')
+        elif key == 'startup_frames':
+            if value is None or value > goal:
+                bad.append(f'start-up {value} > {goal:g} frames')
+        elif key in ('posed',):
+            if not value >= goal:
+                bad.append(f'{key} {value:.3f} < {goal:g}')
+        elif not value <= goal:
+            bad.append(f'{key} {value:.3g} > {goal:g}')
+    return bad
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the benchmark; 0 when every target is met."""
+    from landmark_localizer.bench.integrity import INTEGRITY_SHARE
+    from landmark_localizer.bench.worlds import RUNS, run_argv, targets
+    from landmark_localizer.errors import LocalizerError
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    log = out / 'bench.log'
+    try:
+        seeds = [int(s) for s in args.seeds.split(',') if s]
+    except ValueError:
+        raise LocalizerError(f'--seeds takes integers, got {args.seeds!r}') from None
+    scenes = [s for s in args.scenes.split(',') if s]
+    unknown = set(scenes) - {'room', 'hall', 'floor'}
+    runs = RUNS if args.runs is None else tuple(r for r in args.runs.split(',') if r)
+    unknown |= set(runs) - set(RUNS)
+    if unknown or not scenes or not seeds or not runs:
+        raise LocalizerError(f'unknown or no scenes or runs: {sorted(unknown)}')
+    rows: list[dict[str, Any]] = []
+    for scene in scenes:
+        for seed in seeds:
+            db = _database(scene, seed, out, log)
+            for name in runs:
+                bag = out / 'bags' / f'{scene}_{name}_s{seed}'
+                if not bag.exists():
+                    bag.parent.mkdir(parents=True, exist_ok=True)
+                    argv = run_argv(_scene_arg(scene, seed, out), name, seed)
+                    _vbn([*argv, '--out', str(bag)], log)
+                figures = _localize(db, bag, args.settings).as_dict()
+                figures.update(scene=scene, seed=seed, run=name,
+                               failures=_failures(figures, targets(name)))
+                rows.append(figures)
+                print(_row(figures), flush=True)
+    within = sum(r['within'] * r['poses'] for r in rows) / max(sum(r['poses'] for r in rows), 1)
+    summary = {'within_3_sigma_all_runs': within, 'target': INTEGRITY_SHARE,
+               'far_all_runs': sum(r['far'] for r in rows),
+               'runs_failing': sum(bool(r['failures']) for r in rows)}
+    (out / 'results.json').write_text(json.dumps({'runs': rows, 'summary': summary},
+                                                 indent=1, default=float))
+    print(f'all runs: {100 * within:.2f} % of poses within 3 sigma (target '
+          f'{100 * INTEGRITY_SHARE:.0f} %), {summary["far_all_runs"]} poses > 50 cm off, '
+          f'{summary["runs_failing"]} of {len(rows)} runs miss a target')
+    passed = within >= INTEGRITY_SHARE and summary['runs_failing'] == 0
+    print('PASS' if passed else 'FAIL')
+    return 0 if passed else 1
+
+
+def _row(f: dict[str, Any]) -> str:
+    recovery = ','.join('-' if r is None else str(r) for r in f['recovery'])
+    return (f"{f['scene']:6s} s{f['seed']} {f['run']:10s} posed {100 * f['posed']:5.1f} % "
+            f"median {100 * f['median_m']:.2f} p95 {100 * f['p95_m']:.2f} cm, "
+            f"> 50 cm {f['far']}, within 3 sigma {100 * f['within']:.1f} % "
+            f"(pos {100 * f['within_position']:.1f}, heading {100 * f['within_heading']:.1f})"
+            f", start-up {f['startup_frames']}"
+            + (f', recovery {recovery}' if f['recovery'] else '')
+            + (f"  MISS: {'; '.join(f['failures'])}" if f['failures'] else ''))
