@@ -99,6 +99,14 @@ class LocalizerConfig:
             database without patches: the patches of a schema 4 file have their own).
         scene_max_move_m: a scene point is searched anew once the camera moved this
             far from where its patch was taken, metres (a database without patches).
+        bridge_std_per_m: frames without a pose from the images are bridged by the
+            odometry from the last one (:mod:`landmark_localizer.bridging`): its position
+            error per metre driven, along and across (fraction).
+        bridge_yaw_deg_per_m: ... its heading error per metre driven, degrees.
+        bridge_yaw_std_per_rad: ... its heading error per radian turned (fraction).
+        bridge_max_std_m: bridging stops once the position's standard deviation passes
+            this, metres (0: no bridging).
+        bridge_max_s: ... or this long after the last pose from the images, seconds.
         seed: random generator seed of the robust solvers.
     """
 
@@ -144,6 +152,11 @@ class LocalizerConfig:
     scene_search_deg: float = 1.75
     scene_patch_px: int = 31
     scene_max_move_m: float = 0.4
+    bridge_std_per_m: float = 0.05
+    bridge_yaw_deg_per_m: float = 2.0
+    bridge_yaw_std_per_rad: float = 0.05
+    bridge_max_std_m: float = 0.15
+    bridge_max_s: float = 5.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -174,6 +187,10 @@ class LocalizerConfig:
         if self.scene_patch_px < 11 or self.scene_patch_px % 2 == 0:
             raise LocalizerError(f'scene_patch_px must be odd and >= 11, got '
                                  f'{self.scene_patch_px}')
+        for name in ('bridge_std_per_m', 'bridge_yaw_deg_per_m', 'bridge_yaw_std_per_rad',
+                     'bridge_max_std_m', 'bridge_max_s'):
+            if getattr(self, name) < 0:
+                raise LocalizerError(f'{name} must be >= 0, got {getattr(self, name)}')
         for name in ('scene_search_deg', 'scene_max_move_m', 'absolute_huber_px'):
             if getattr(self, name) <= 0:
                 raise LocalizerError(f'{name} must be > 0, got {getattr(self, name)}')

@@ -16,6 +16,10 @@ Where no region verifies, the frame still gets a pose when its matches to the
 database's triangulated class points fix one (:mod:`.absolute_pose`, event
 ``'absolute'``): the state stays LOST and the next frame votes again.
 
+Frames with no trustworthy pose from the images are bridged by the odometry from the
+last one, with a covariance that grows with the path (:mod:`.bridging`, event
+``'odometry'``), until it is too wide.
+
 Counters (:attr:`Localizer.stats`) separate region changes by prediction from those
 after a loss, as the thesis's switching rule is meant to make the second kind rare.
 Time going backwards (a bag that loops) resets the state.
@@ -31,16 +35,23 @@ import numpy as np
 
 from landmark_db.database import LandmarkDatabase
 from landmark_localizer.absolute_pose import absolute_solution
+from landmark_localizer.bridging import BridgeModel, OdometryBridge
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.points_refinement import refine_on_points
-from landmark_localizer.pose import PoseSolution, base_pose, refine_pose, solve_pose
-from landmark_localizer.switching import MotionPredictor, choose_region
+from landmark_localizer.pose import (
+    PoseSolution,
+    base_covariance,
+    base_pose,
+    refine_pose,
+    solve_pose,
+)
+from landmark_localizer.switching import MotionPredictor, TrackedCounts, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
 from vbn_common.features import SiftConfig, extract_features_scaled
-from vbn_common.geometry.frames import compose_poses, invert_pose
+from vbn_common.geometry.frames import compose_poses
 
 __all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
 
@@ -110,6 +121,7 @@ class Stats:
     falls_to_lost: int = 0
     resets: int = 0
     absolute_poses: int = 0
+    bridged: int = 0
     events: dict[str, int] = field(default_factory=dict)
 
 
@@ -136,6 +148,7 @@ class Localizer:
         self.detector = self.sift.create()
         self.tracker = Tracker(self.index, config, self.detector)
         self.predictor = MotionPredictor()
+        self.bridge = OdometryBridge()
         self.rng = np.random.default_rng(config.seed)
         self.stats = Stats()
         self.state = LOST
@@ -155,6 +168,7 @@ class Localizer:
         self.hint = None
         self.tracker.reset()
         self.predictor.reset()
+        self.bridge.reset()
         self._failures = 0
         self._handover = -1
         self._last_camera = None
@@ -174,6 +188,7 @@ class Localizer:
     def reset_motion(self) -> None:
         """Forget the motion history (odometry restarted); the region is kept."""
         self.predictor.reset()
+        self.bridge.reset()
 
     def set_hint(self, x: float, y: float, radius: float | None = None) -> None:
         """Restrict the next votes to regions near ``(x, y)`` (``/initialpose``)."""
@@ -182,6 +197,7 @@ class Localizer:
         self._handover = -1
         self._last_camera = None
         self.tracker.reset()
+        self.bridge.reset()
 
     # -- one frame ------------------------------------------------------------------------
     def step(self, frame: Frame) -> Estimate:
@@ -398,8 +414,9 @@ class Localizer:
                 scene=self.tracker.scene.measure(image, solution.estimate.pose))
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
-            if jump > config.max_jump_m:
+            if jump > config.max_jump_m:   # kidnapped? then the odometry bridges nothing
                 solution = None
+                self.bridge.reset()
         if solution is None:
             self._failures += 1
             self.tracker.tracks = tracks
@@ -474,7 +491,7 @@ class Localizer:
         ahead = self.predictor.predict(current, config.predict_horizon_s)
         target = choose_region(self.index, region, current, ahead,
                                config.border_margin,
-                               _TrackedCounts(self.index, self.tracker.tracks.class_ids))
+                               TrackedCounts(self.index, self.tracker.tracks.class_ids))
         if target is None:
             self._handover = -1
             return
@@ -543,6 +560,9 @@ class Localizer:
             event = event or 'predicted_switch'
             self._switched = False
         pose = cov = camera = two_view = None
+        c = self.config
+        model = BridgeModel(c.bridge_std_per_m, c.bridge_yaw_deg_per_m,
+                            c.bridge_yaw_std_per_rad, c.bridge_max_std_m, c.bridge_max_s)
         if solution is not None and (self.state == TRACKING or solution.views_used == 0):
             est = solution.estimate
             cov_ok = np.all(np.isfinite(est.covariance)) and \
@@ -551,38 +571,27 @@ class Localizer:
             if cov_ok and np.all(np.isfinite(est.pose)):
                 camera = est.pose
                 pose = base_pose(self.index, camera)
-                cov = _carry_covariance(est.covariance, camera, self.index.camera_mount)
+                cov = base_covariance(est.covariance, camera, self.index.camera_mount)
                 self.stats.poses += 1
                 self.last_pose_stamp = frame.stamp_ns
                 self._last_camera = camera
                 self.predictor.add(frame.stamp_ns, pose, frame.odom)
                 if solution.two_view_pose is not None:
                     two_view = base_pose(self.index, solution.two_view_pose)
+                pose, cov, kept = self.bridge.fuse(frame.stamp_ns, pose, cov, frame.odom, model,
+                                                   fresh=event in _VOTED)
+                if kept is not None:
+                    self.bridge.anchor(frame.stamp_ns, pose, kept, frame.odom)
+                else:   # the images contradict a sharper odometry: it gives the pose
+                    event = event or 'odometry'
+        bridged = None if pose is not None else self.bridge.bridge(frame.stamp_ns, frame.odom,
+                                                                   model)
+        if bridged is not None:
+            pose, cov = bridged
+            camera, event = compose_poses(pose, self.index.camera_mount), event or 'odometry'
+            self.stats.bridged += 1
         if event:
             self.stats.events[event] = self.stats.events.get(event, 0) + 1
         return Estimate(frame.stamp_ns, self.state, self.region if self.state == TRACKING
                         else -1, pose, cov, camera, tracked, event,
                         time.perf_counter() - start, two_view)
-
-
-class _TrackedCounts:
-    """Per region, its features among ``class_ids``: counted only when asked (a tie)."""
-
-    def __init__(self, index: DatabaseIndex, class_ids: np.ndarray) -> None:
-        self.index, self.class_ids = index, class_ids
-
-    def get(self, region: int, default: int = 0) -> int:
-        features = self.index.regions[region].features
-        return int(np.isin(features, self.class_ids).sum()) if len(features) else default
-
-
-def _carry_covariance(cov: np.ndarray, camera: np.ndarray, mount: np.ndarray) -> np.ndarray:
-    """Covariance of ``camera (+) mount^-1`` from the camera pose's covariance."""
-    t = invert_pose(mount)
-    c, s = np.cos(camera[2]), np.sin(camera[2])
-    jac = np.array([[1.0, 0.0, -s * t[0] - c * t[1]],
-                    [0.0, 1.0, c * t[0] - s * t[1]],
-                    [0.0, 0.0, 1.0]])
-    out = jac @ cov @ jac.T
-    return 0.5 * (out + out.T)
-

@@ -26,7 +26,7 @@ from vbn_common.geometry.localize import PoseEstimate, position_from_views
 from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
 from vbn_common.geometry.two_view import relative_motion
 
-__all__ = ['PoseSolution', 'base_pose', 'refine_pose', 'solve_pose']
+__all__ = ['PoseSolution', 'base_covariance', 'base_pose', 'refine_pose', 'solve_pose']
 
 
 @dataclass(frozen=True)
@@ -335,3 +335,15 @@ def _ray_angle(pose: np.ndarray, view_poses: list[np.ndarray]) -> float:
     d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-12)
     cosines = np.clip(np.abs(d @ d.T), 0.0, 1.0)
     return float(np.arccos(cosines.min()))
+
+
+def base_covariance(cov: np.ndarray, camera: np.ndarray, mount: np.ndarray) -> np.ndarray:
+    """Covariance of ``camera (+) mount^-1`` from the camera pose's covariance."""
+    t = invert_pose(mount)
+    c, s = np.cos(camera[2]), np.sin(camera[2])
+    jac = np.array([[1.0, 0.0, -s * t[0] - c * t[1]],
+                    [0.0, 1.0, c * t[0] - s * t[1]],
+                    [0.0, 0.0, 1.0]])
+    out = jac @ cov @ jac.T
+    return 0.5 * (out + out.T)
+

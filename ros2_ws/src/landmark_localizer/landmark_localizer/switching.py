@@ -34,7 +34,7 @@ import numpy as np
 from landmark_localizer.index import DatabaseIndex
 from vbn_common.geometry.frames import compose_poses, invert_pose
 
-__all__ = ['MotionPredictor', 'choose_region']
+__all__ = ['MotionPredictor', 'TrackedCounts', 'choose_region']
 
 
 class MotionPredictor:
@@ -148,3 +148,14 @@ def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
     if scores[best][0] <= current_score and index.region_contains(region, [predicted_pose])[0]:
         return None
     return int(both[best])
+
+
+class TrackedCounts:
+    """Per region, its features among ``class_ids``: counted only when asked (a tie)."""
+
+    def __init__(self, index: DatabaseIndex, class_ids: np.ndarray) -> None:
+        self.index, self.class_ids = index, class_ids
+
+    def get(self, region: int, default: int = 0) -> int:
+        features = self.index.regions[region].features
+        return int(np.isin(features, self.class_ids).sum()) if len(features) else default

@@ -1,0 +1,167 @@
+"""Frames without a pose from the images, bridged by the odometry (issue 18).
+
+Not in the thesis. Where the images give no trustworthy pose (the region's features
+hidden by a person, posters taken down, a frame dropped under load), a navigation stack
+still needs one, with an honest covariance: the last pose the images gave (the anchor)
+moved by the odometry since, its covariance carried through the composition and grown
+by the odometry's error over the path driven and turned since the anchor, as AMCL's
+motion model does between its updates. Bridging stops, and the localizer reports no
+pose, once the position's standard deviation passes ``bridge_max_std_m`` or the anchor
+is older than ``bridge_max_s``. The same prediction joins each pose from the images
+(:meth:`OdometryBridge.fuse`): their weighted mean where they agree, and where they
+disagree beyond their joint uncertainty, the image's pose with its covariance grown by
+the disagreement.
+
+The odometry's error model (per metre driven: ``bridge_std_per_m`` of the distance
+along and across, ``bridge_yaw_deg_per_m`` of heading; per radian turned:
+``bridge_yaw_std_per_rad``) is deliberately wider than a wheel's usual 1 to 2 %: a
+covariance that claims less than it knows is what the issue forbids.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
+
+__all__ = ['INNOVATION_LIMIT', 'BridgeModel', 'OdometryBridge']
+
+#: The 99.9 % quantile of the chi-square distribution with three degrees of freedom.
+INNOVATION_LIMIT = 16.27
+
+
+@dataclass(frozen=True)
+class BridgeModel:
+    """The odometry's error per metre and per radian, and how long to bridge.
+
+    Attributes:
+        std_per_m: Position error per metre driven, along and across (fraction).
+        yaw_deg_per_m: Heading error per metre driven, degrees.
+        yaw_std_per_rad: Heading error per radian turned (fraction).
+        max_std_m: Stop bridging beyond this position standard deviation (0: never
+            bridge).
+        max_s: ... or this long after the anchor, seconds.
+    """
+
+    std_per_m: float = 0.05
+    yaw_deg_per_m: float = 2.0
+    yaw_std_per_rad: float = 0.05
+    max_std_m: float = 0.15
+    max_s: float = 5.0
+
+
+class OdometryBridge:
+    """Carries the last pose from the images by the odometry (module docstring)."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the anchor (a reset, a kidnapping, an odometry restart)."""
+        self._anchor: tuple[int, np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._last_odom: np.ndarray | None = None
+        self.path_m = 0.0
+        self.turn_rad = 0.0
+
+    def anchor(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
+               odom: np.ndarray | None) -> None:
+        """Take a pose from the images (with its odometry pose) as the new anchor."""
+        if odom is None or not np.all(np.isfinite(odom)):
+            self.reset()
+            return
+        self._anchor = (stamp_ns, np.asarray(pose, float).copy(),
+                        np.asarray(covariance, float).copy(), np.asarray(odom, float).copy())
+        self._last_odom = self._anchor[3]
+        self.path_m = self.turn_rad = 0.0
+
+    def bridge(self, stamp_ns: int, odom: np.ndarray | None, model: BridgeModel
+               ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return ``(pose, covariance)`` now by the odometry, or None (nothing to bridge).
+
+        Every call integrates the path and the turn since the previous one, so call it
+        on every frame without a pose from the images.
+        """
+        return self._predict(stamp_ns, odom, model, commit=True)
+
+    def fuse(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
+             odom: np.ndarray | None, model: BridgeModel, fresh: bool = False
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """Return a pose from the images joined with the odometry's prediction of it.
+
+        The pose from the images and the anchor carried by the odometry are two
+        estimates of the same pose. Where they agree (squared Mahalanobis distance of
+        their difference ``nu`` at most :data:`INNOVATION_LIMIT`, the 99.9 % quantile
+        with three degrees of freedom), the pose is their weighted mean (a Kalman
+        update). Where they disagree one of them is wrong. When the image's position is
+        the less certain (a pose from few features on one wall, drifting away frame
+        after frame while the odometry holds), the odometry's prediction is the pose and
+        the anchor stays; otherwise, or when the pose is ``fresh`` (a region found anew
+        by its features, after a loss: the robot may have been carried away), the
+        image's pose is, its covariance grown by ``nu nu^T`` (it claims no more than the
+        two agree on). Unchanged without an anchor or once the
+        prediction is too wide to judge by (``max_std_m``).
+
+        Returns:
+            ``(pose, covariance to publish, covariance to anchor on)``: the published one
+            is the image's (consecutive images share their features and map points, so
+            their errors are not independent, and a covariance that shrank frame after
+            frame as if they were would claim more than it knows), the anchor's the
+            update's; None for the anchor when the prediction is the pose (the anchor
+            stays: call :meth:`anchor` only with a covariance).
+        """
+        pose = np.asarray(pose, float)
+        predicted = self._predict(stamp_ns, odom, model, commit=False)
+        if predicted is None:
+            return pose, covariance, covariance
+        nu = pose - predicted[0]
+        nu[2] = float(wrap_angle(nu[2]))
+        try:
+            joint = covariance + predicted[1]
+            d2 = float(nu @ np.linalg.solve(joint, nu))
+            gain = predicted[1] @ np.linalg.inv(joint)
+        except np.linalg.LinAlgError:
+            return pose, covariance, covariance
+        if d2 > INNOVATION_LIMIT:
+            if not fresh and np.trace(covariance[:2, :2]) > np.trace(predicted[1][:2, :2]):
+                held = self._predict(stamp_ns, odom, model, commit=True)
+                return held[0], held[1], None
+            wide = covariance + np.outer(nu, nu)
+            return pose, wide, wide
+        fused = predicted[0] + gain @ nu
+        fused[2] = float(wrap_angle(fused[2]))
+        updated = (np.eye(3) - gain) @ predicted[1]
+        return fused, covariance, 0.5 * (updated + updated.T)
+
+    def _predict(self, stamp_ns: int, odom: np.ndarray | None, model: BridgeModel,
+                 commit: bool) -> tuple[np.ndarray, np.ndarray] | None:
+        if self._anchor is None or model.max_std_m <= 0 or odom is None or \
+                not np.all(np.isfinite(odom)):
+            return None
+        stamp0, pose0, cov0, odom0 = self._anchor
+        if not 0 <= (stamp_ns - stamp0) / 1e9 <= model.max_s:
+            return None
+        odom = np.asarray(odom, float)
+        step = compose_poses(invert_pose(self._last_odom), odom)
+        path_m = self.path_m + float(np.hypot(step[0], step[1]))
+        turn_rad = self.turn_rad + abs(float(wrap_angle(step[2])))
+        if commit:
+            self.path_m, self.turn_rad, self._last_odom = path_m, turn_rad, odom
+        delta = compose_poses(invert_pose(odom0), odom)
+        pose = compose_poses(pose0, delta)
+        c, s = math.cos(pose0[2]), math.sin(pose0[2])
+        j_anchor = np.array([[1.0, 0.0, -s * delta[0] - c * delta[1]],
+                             [0.0, 1.0, c * delta[0] - s * delta[1]],
+                             [0.0, 0.0, 1.0]])
+        j_delta = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        yaw_std = math.radians(model.yaw_deg_per_m) * path_m + model.yaw_std_per_rad * turn_rad
+        # Along and across the path, and across it again by the heading's drift on the
+        # way (a heading error growing along the path moves the end by a third of it).
+        xy_var = (model.std_per_m * path_m) ** 2 + (path_m * yaw_std) ** 2 / 3.0
+        noise = np.diag([xy_var, xy_var, yaw_std ** 2])
+        cov = j_anchor @ cov0 @ j_anchor.T + j_delta @ noise @ j_delta.T
+        cov = 0.5 * (cov + cov.T)
+        if math.sqrt(max(cov[0, 0], cov[1, 1])) > model.max_std_m:
+            return None
+        return pose, cov

@@ -1,0 +1,91 @@
+"""Frames without a pose from the images, bridged by the odometry (issue 18), by hand."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from landmark_localizer.bridging import INNOVATION_LIMIT, BridgeModel, OdometryBridge
+
+S = 10**8   # 10 Hz
+MODEL = BridgeModel(std_per_m=0.05, yaw_deg_per_m=2.0, yaw_std_per_rad=0.05,
+                    max_std_m=0.15, max_s=5.0)
+
+
+def test_the_anchor_moves_by_the_odometry_and_its_covariance_grows_with_the_path() -> None:
+    bridge = OdometryBridge()
+    anchor_cov = np.diag([1e-6, 1e-6, 1e-6])
+    # In map the robot stands at (1, 2) facing +y; its odometry frame is turned by -90 deg.
+    bridge.anchor(0, np.array([1.0, 2.0, math.pi / 2]), anchor_cov, np.array([5.0, 0.0, 0.0]))
+    # The odometry drives 0.5 m straight ahead (its +x) in five steps.
+    for k in range(1, 6):
+        out = bridge.bridge(k * S, np.array([5.0 + 0.1 * k, 0.0, 0.0]), MODEL)
+    pose, cov = out
+    np.testing.assert_allclose(pose, [1.0, 2.5, math.pi / 2], atol=1e-12)
+    assert bridge.path_m == pytest.approx(0.5) and bridge.turn_rad == pytest.approx(0.0)
+    yaw_std = math.radians(2.0) * 0.5
+    xy_var = (0.05 * 0.5) ** 2 + (0.5 * yaw_std) ** 2 / 3.0
+    assert cov[2, 2] == pytest.approx(1e-6 + yaw_std ** 2)
+    # The anchor's heading error moves the end across the way (along map x) by 0.5 m.
+    assert cov[0, 0] == pytest.approx(1e-6 + 0.25 * 1e-6 + xy_var)
+    assert cov[1, 1] == pytest.approx(1e-6 + xy_var)
+
+
+def test_bridging_stops_when_too_wide_too_old_or_without_odometry() -> None:
+    bridge = OdometryBridge()
+    assert bridge.bridge(S, np.zeros(3), MODEL) is None          # no anchor
+    bridge.anchor(0, np.zeros(3), np.eye(3) * 1e-6, np.zeros(3))
+    assert bridge.bridge(S, None, MODEL) is None                   # no odometry now
+    assert bridge.bridge(6 * 10**9, np.zeros(3), MODEL) is None    # older than 5 s
+    # 3 m driven: 5 % is 15 cm along, and the heading's drift adds more: too wide.
+    assert bridge.bridge(2 * S, np.array([3.0, 0.0, 0.0]), MODEL) is None
+    off = OdometryBridge()
+    off.anchor(0, np.zeros(3), np.eye(3) * 1e-6, np.zeros(3))
+    assert off.bridge(S, np.array([0.1, 0.0, 0.0]), BridgeModel(max_std_m=0.0)) is None
+    # An anchor without odometry cannot be carried.
+    lone = OdometryBridge()
+    lone.anchor(0, np.zeros(3), np.eye(3) * 1e-6, None)
+    assert lone.bridge(S, np.array([0.1, 0.0, 0.0]), MODEL) is None
+
+
+def _anchored(cov: float = 1e-6) -> OdometryBridge:
+    bridge = OdometryBridge()
+    bridge.anchor(0, np.zeros(3), np.eye(3) * cov, np.zeros(3))
+    return bridge
+
+
+def test_an_agreeing_pose_is_the_weighted_mean_with_the_images_covariance() -> None:
+    odom = np.array([0.1, 0.0, 0.0])
+    prediction, predicted_cov = _anchored()._predict(S, odom, MODEL, commit=False)
+    image = prediction + np.array([0.002, 0.0, 0.0])
+    image_cov = predicted_cov.copy()                  # as certain as the prediction
+    pose, published, kept = _anchored().fuse(S, image, image_cov, odom, MODEL)
+    np.testing.assert_allclose(pose, prediction + [0.001, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_array_equal(published, image_cov)
+    np.testing.assert_allclose(kept, 0.5 * predicted_cov, atol=1e-15)
+
+
+def test_a_vague_pose_that_contradicts_a_sharp_odometry_gives_way_to_it() -> None:
+    odom = np.array([0.1, 0.0, 0.0])
+    bridge = _anchored()
+    prediction, predicted_cov = bridge._predict(S, odom, MODEL, commit=False)
+    image = prediction + np.array([0.45, 0.0, 0.0])   # 45 cm off, claiming 10 cm
+    image_cov = np.diag([0.01, 0.01, 1e-4])
+    nu = image - prediction
+    assert nu @ np.linalg.solve(image_cov + predicted_cov, nu) > INNOVATION_LIMIT
+    pose, published, kept = bridge.fuse(S, image, image_cov, odom, MODEL)
+    assert kept is None
+    np.testing.assert_allclose(pose, prediction)
+    np.testing.assert_allclose(published, predicted_cov)
+    assert bridge.path_m == pytest.approx(0.1)        # the path is counted once
+    # A sharp pose that contradicts it (the robot was carried away) is the image's, its
+    # covariance grown by the disagreement; so is a fresh vote's, however vague.
+    sharp = np.eye(3) * 1e-8
+    pose, published, kept = _anchored().fuse(S, image, sharp, odom, MODEL)
+    np.testing.assert_array_equal(pose, image)
+    np.testing.assert_allclose(published, sharp + np.outer(nu, nu))
+    np.testing.assert_array_equal(kept, published)
+    pose, _, kept = _anchored().fuse(S, image, image_cov, odom, MODEL, fresh=True)
+    np.testing.assert_array_equal(pose, image)
+    assert kept is not None
