@@ -79,13 +79,17 @@ def test_a_vague_pose_that_contradicts_a_sharp_odometry_gives_way_to_it() -> Non
     np.testing.assert_allclose(pose, prediction)
     np.testing.assert_allclose(published, predicted_cov)
     assert bridge.path_m == pytest.approx(0.1)        # the path is counted once
-    # A sharp pose that contradicts it (the robot was carried away) is the image's, its
-    # covariance grown by the disagreement; so is a fresh vote's, however vague.
+    # A sharp pose that contradicts it is a rival: no pose this frame; the next frame
+    # that confirms it (the rival moved by the odometry) wins: the robot was carried.
     sharp = np.eye(3) * 1e-8
-    pose, published, kept = _anchored().fuse(S, image, sharp, odom, MODEL)
+    carried = _anchored()
+    assert carried.fuse(S, image, sharp, odom, MODEL) == (None, None, None)
+    later = np.array([0.2, 0.0, 0.0])
+    moved = image + np.array([0.1, 0.0, 0.0])
+    pose, published, kept = carried.fuse(2 * S, moved, sharp, later, MODEL)
+    np.testing.assert_array_equal(pose, moved)
+    np.testing.assert_array_equal(kept, sharp)
+    # A fresh vote wins at once, its covariance grown by the disagreement.
+    pose, published, kept = _anchored().fuse(S, image, image_cov, odom, MODEL, fresh=True)
     np.testing.assert_array_equal(pose, image)
-    np.testing.assert_allclose(published, sharp + np.outer(nu, nu))
-    np.testing.assert_array_equal(kept, published)
-    pose, _, kept = _anchored().fuse(S, image, image_cov, odom, MODEL, fresh=True)
-    np.testing.assert_array_equal(pose, image)
-    assert kept is not None
+    np.testing.assert_allclose(published, image_cov + np.outer(nu, nu))

@@ -26,10 +26,14 @@ import numpy as np
 
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 
-__all__ = ['INNOVATION_LIMIT', 'BridgeModel', 'OdometryBridge']
+__all__ = ['INNOVATION_LIMIT', 'SHARPER', 'BridgeModel', 'OdometryBridge']
 
 #: The 99.9 % quantile of the chi-square distribution with three degrees of freedom.
 INNOVATION_LIMIT = 16.27
+#: A pose from the images that contradicts the odometry is sharp (a rival, which the next
+#: frame may confirm) when its standard deviation is less than this share of the
+#: odometry's prediction's.
+SHARPER = 0.5
 
 
 @dataclass(frozen=True)
@@ -64,6 +68,7 @@ class OdometryBridge:
         self._last_odom: np.ndarray | None = None
         self.path_m = 0.0
         self.turn_rad = 0.0
+        self._rival: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def anchor(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
                odom: np.ndarray | None) -> None:
@@ -87,33 +92,43 @@ class OdometryBridge:
 
     def fuse(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
              odom: np.ndarray | None, model: BridgeModel, fresh: bool = False
-             ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+             ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
         """Return a pose from the images joined with the odometry's prediction of it.
 
         The pose from the images and the anchor carried by the odometry are two
         estimates of the same pose. Where they agree (squared Mahalanobis distance of
         their difference ``nu`` at most :data:`INNOVATION_LIMIT`, the 99.9 % quantile
         with three degrees of freedom), the pose is their weighted mean (a Kalman
-        update). Where they disagree one of them is wrong. When the image's position is
-        the less certain (a pose from few features on one wall, drifting away frame
-        after frame while the odometry holds), the odometry's prediction is the pose and
-        the anchor stays; otherwise, or when the pose is ``fresh`` (a region found anew
-        by its features, after a loss: the robot may have been carried away), the
-        image's pose is, its covariance grown by ``nu nu^T`` (it claims no more than the
-        two agree on). Unchanged without an anchor or once the
-        prediction is too wide to judge by (``max_std_m``).
+        update). Where they disagree one of them is wrong, and the odometry's prediction
+        is the pose while the anchor stays:
+
+        - a vague image pose (its position's standard deviation at least
+          :data:`SHARPER` of the prediction's) gives way: a tracked pose drifts away
+          frame after frame when a person walks across its few features (10 cm in 8
+          frames on a changed room, claiming 1.5 cm) while the odometry holds;
+        - a sharp one is a rival: no pose is published for that frame, and the image
+          wins on the next frame that confirms it (the rival carried by the odometry
+          agrees with that frame's pose): the robot was carried away, or the odometry
+          slipped. One sharp wrong pose (an absolute pose 60 cm off on look-alike
+          posters, claiming 0.8 cm) is never published;
+        - a ``fresh`` one (a region found anew by its features' votes: the robot may
+          have been carried away) wins at once, its covariance grown by ``nu nu^T``.
+
+        Unchanged without an anchor or once the prediction is too wide to judge by
+        (``max_std_m``).
 
         Returns:
             ``(pose, covariance to publish, covariance to anchor on)``: the published one
             is the image's (consecutive images share their features and map points, so
             their errors are not independent, and a covariance that shrank frame after
             frame as if they were would claim more than it knows), the anchor's the
-            update's; None for the anchor when the prediction is the pose (the anchor
-            stays: call :meth:`anchor` only with a covariance).
+            update's; None for the anchor when the anchor stays (the prediction is the
+            pose, or no pose: all three None).
         """
         pose = np.asarray(pose, float)
         predicted = self._predict(stamp_ns, odom, model, commit=False)
         if predicted is None:
+            self._rival = None
             return pose, covariance, covariance
         nu = pose - predicted[0]
         nu[2] = float(wrap_angle(nu[2]))
@@ -123,16 +138,38 @@ class OdometryBridge:
             gain = predicted[1] @ np.linalg.inv(joint)
         except np.linalg.LinAlgError:
             return pose, covariance, covariance
-        if d2 > INNOVATION_LIMIT:
-            if not fresh and np.trace(covariance[:2, :2]) > np.trace(predicted[1][:2, :2]):
-                held = self._predict(stamp_ns, odom, model, commit=True)
-                return held[0], held[1], None
+        if d2 <= INNOVATION_LIMIT:
+            self._rival = None
+            fused = predicted[0] + gain @ nu
+            fused[2] = float(wrap_angle(fused[2]))
+            updated = (np.eye(3) - gain) @ predicted[1]
+            return fused, covariance, 0.5 * (updated + updated.T)
+        sharp = np.trace(covariance[:2, :2]) < SHARPER ** 2 * np.trace(predicted[1][:2, :2])
+        if fresh:
+            self._rival = None
             wide = covariance + np.outer(nu, nu)
             return pose, wide, wide
-        fused = predicted[0] + gain @ nu
-        fused[2] = float(wrap_angle(fused[2]))
-        updated = (np.eye(3) - gain) @ predicted[1]
-        return fused, covariance, 0.5 * (updated + updated.T)
+        if sharp and self._confirms(pose, covariance, odom):
+            self._rival = None
+            return pose, covariance, covariance
+        held = self._predict(stamp_ns, odom, model, commit=True)
+        if not sharp:
+            return held[0], held[1], None
+        self._rival = (pose, covariance, np.asarray(odom, float))
+        return None, None, None
+
+    def _confirms(self, pose: np.ndarray, covariance: np.ndarray, odom: np.ndarray) -> bool:
+        """Whether the last rival, carried by the odometry to now, agrees with ``pose``."""
+        if self._rival is None:
+            return False
+        then, then_cov, then_odom = self._rival
+        carried = compose_poses(then, compose_poses(invert_pose(then_odom), odom))
+        nu = pose - carried
+        nu[2] = float(wrap_angle(nu[2]))
+        try:
+            return float(nu @ np.linalg.solve(covariance + then_cov, nu)) <= INNOVATION_LIMIT
+        except np.linalg.LinAlgError:
+            return False
 
     def _predict(self, stamp_ns: int, odom: np.ndarray | None, model: BridgeModel,
                  commit: bool) -> tuple[np.ndarray, np.ndarray] | None:

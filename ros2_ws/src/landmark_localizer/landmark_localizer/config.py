@@ -107,6 +107,9 @@ class LocalizerConfig:
         bridge_max_std_m: bridging stops once the position's standard deviation passes
             this, metres (0: no bridging).
         bridge_max_s: ... or this long after the last pose from the images, seconds.
+        exposure_target: a frame whose 99th percentile of grey is below this is
+            brightened to it before its features are found (an auto-exposure: SIFT's
+            contrast threshold is absolute; 0: never).
         seed: random generator seed of the robust solvers.
     """
 
@@ -157,6 +160,7 @@ class LocalizerConfig:
     bridge_yaw_std_per_rad: float = 0.05
     bridge_max_std_m: float = 0.15
     bridge_max_s: float = 5.0
+    exposure_target: float = 200.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -188,7 +192,7 @@ class LocalizerConfig:
             raise LocalizerError(f'scene_patch_px must be odd and >= 11, got '
                                  f'{self.scene_patch_px}')
         for name in ('bridge_std_per_m', 'bridge_yaw_deg_per_m', 'bridge_yaw_std_per_rad',
-                     'bridge_max_std_m', 'bridge_max_s'):
+                     'bridge_max_std_m', 'bridge_max_s', 'exposure_target'):
             if getattr(self, name) < 0:
                 raise LocalizerError(f'{name} must be >= 0, got {getattr(self, name)}')
         for name in ('scene_search_deg', 'scene_max_move_m', 'absolute_huber_px'):

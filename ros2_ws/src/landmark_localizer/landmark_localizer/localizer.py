@@ -26,7 +26,7 @@ Time going backwards (a bag that loops) resets the state.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 import logging
 import math
 import time
@@ -38,6 +38,7 @@ from landmark_localizer.absolute_pose import absolute_solution
 from landmark_localizer.bridging import BridgeModel, OdometryBridge
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
+from landmark_localizer.frames import Estimate, Frame, Stats, exposed
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.points_refinement import refine_on_points
 from landmark_localizer.pose import (
@@ -60,69 +61,6 @@ _LOG = logging.getLogger(__name__)
 LOST = 'LOST'
 TRACKING = 'TRACKING'
 _VOTED = ('vote', 'neighbour_vote', 'global_vote')
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One camera image and what else is known at its time.
-
-    Attributes:
-        stamp_ns: The image's stamp.
-        image: (H, W) uint8 grey image.
-        odom: (3,) ``odom -> base_link`` planar pose at the image's stamp, or None.
-    """
-
-    stamp_ns: int
-    image: np.ndarray
-    odom: np.ndarray | None = None
-
-
-@dataclass(frozen=True)
-class Estimate:
-    """What one step found.
-
-    Attributes:
-        stamp_ns: The frame's stamp.
-        state: ``LOST`` or ``TRACKING`` after the step.
-        region: The current region, -1 when lost.
-        pose: (3,) ``base_link`` pose in ``map``, or None (no trustworthy pose).
-        covariance: (3, 3) covariance of ``(x, y, yaw)``, or None.
-        camera_pose: (3,) the camera's pose in ``map``, or None.
-        two_view_pose: (3,) the ``base_link`` pose the model views gave (7.4, 7.5)
-            before any refinement on 3-D points, where the pose came from them.
-        tracked: Region features used this frame.
-        event: ``'vote'``, ``'predicted_switch'``, ``'neighbour_vote'`` or
-            ``'global_vote'`` (a region change after the features were lost),
-            ``'lost'``, ``'reset'`` or ``''``.
-        seconds: Time the step took.
-    """
-
-    stamp_ns: int
-    state: str
-    region: int
-    pose: np.ndarray | None
-    covariance: np.ndarray | None
-    camera_pose: np.ndarray | None
-    tracked: int
-    event: str
-    seconds: float
-    two_view_pose: np.ndarray | None = None
-
-
-@dataclass
-class Stats:
-    """Counters over the run."""
-
-    frames: int = 0
-    poses: int = 0
-    votes: int = 0
-    predicted_switches: int = 0
-    lost_switches: int = 0
-    falls_to_lost: int = 0
-    resets: int = 0
-    absolute_poses: int = 0
-    bridged: int = 0
-    events: dict[str, int] = field(default_factory=dict)
 
 
 class Localizer:
@@ -207,6 +145,7 @@ class Localizer:
         if image.ndim != 2 or image.dtype != np.uint8 or min(image.shape) < 16:
             raise LocalizerError(f'a frame must be a grey uint8 image, got {image.dtype} '
                                  f'{image.shape}')
+        image = exposed(image, self.config.exposure_target)
         event = ''
         if self.last_stamp is not None and frame.stamp_ns < self.last_stamp:
             self.reset()
@@ -242,14 +181,17 @@ class Localizer:
         return self._estimate(frame, solution, tracked, event, start)
 
     # -- LOST: voting ---------------------------------------------------------------------
-    def _vote_features(self, image: np.ndarray):  # noqa: ANN202 - (features, nearest)
-        """Return this frame's voting features and their nearest classes (computed once)."""
-        if self._features is None:
-            features = extract_features_scaled(image, self.config.vote_scale, self.sift,
-                                               self.detector)
+    def _vote_features(self, image: np.ndarray, full: bool = False):  # noqa: ANN202
+        """Return this frame's voting features and their nearest classes (computed once).
+
+        At ``vote_scale``, or at full size when ``full`` (and from then on this frame).
+        """
+        if self._features is None or (full and self._features[2] < 1.0):
+            scale = 1.0 if full else self.config.vote_scale
+            features = extract_features_scaled(image, scale, self.sift, self.detector)
             nearest = self.index.nearest_classes(features.descriptors, self.config.vote_checks)
-            self._features = (features, nearest)
-        return self._features
+            self._features, self._scene = (features, nearest, scale), None
+        return self._features[:2]
 
     def _absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
         """Return the pose from the class points when no region verified (or None)."""
@@ -294,7 +236,15 @@ class Localizer:
 
     def _best_verified(self, image: np.ndarray, allowed: np.ndarray | None
                        ) -> Verified | None:
-        features, nearest = self._vote_features(image)
+        best = self._verified(image, allowed, full=False)
+        if best is None and self._features is not None and self._features[2] < 1.0:
+            # A dim, blurred or changed view leaves too few features at the smaller scale.
+            best = self._verified(image, allowed, full=True)
+        return best
+
+    def _verified(self, image: np.ndarray, allowed: np.ndarray | None, full: bool
+                  ) -> Verified | None:
+        features, nearest = self._vote_features(image, full)
         self.stats.votes += 1
         best: Verified | None = None
         for candidate in vote(features, self.index, self.config, allowed, nearest):
@@ -582,10 +532,10 @@ class Localizer:
                                                    fresh=event in _VOTED)
                 if kept is not None:
                     self.bridge.anchor(frame.stamp_ns, pose, kept, frame.odom)
-                else:   # the images contradict a sharper odometry: it gives the pose
-                    event = event or 'odometry'
-        bridged = None if pose is not None else self.bridge.bridge(frame.stamp_ns, frame.odom,
-                                                                   model)
+                else:   # the images contradict a sharper odometry: it gives the pose, or
+                    event = event or ('odometry' if pose is not None else 'withheld')
+        bridged = None if pose is not None or event == 'withheld' else self.bridge.bridge(
+            frame.stamp_ns, frame.odom, model)
         if bridged is not None:
             pose, cov = bridged
             camera, event = compose_poses(pose, self.index.camera_mount), event or 'odometry'
