@@ -93,3 +93,14 @@ def test_a_vague_pose_that_contradicts_a_sharp_odometry_gives_way_to_it() -> Non
     pose, published, kept = _anchored().fuse(S, image, image_cov, odom, MODEL, fresh=True)
     np.testing.assert_array_equal(pose, image)
     np.testing.assert_allclose(published, image_cov + np.outer(nu, nu))
+
+
+def test_a_dim_frame_is_brightened_to_the_exposure_target_and_a_bright_one_kept() -> None:
+    from landmark_localizer.frames import MAX_EXPOSURE_GAIN, exposed
+
+    ramp = np.tile(np.arange(100, dtype=np.uint8), (10, 1))      # 99th percentile 98
+    out = exposed(ramp, 196.0)
+    np.testing.assert_array_equal(out[0, :5], [0, 2, 4, 6, 8])   # twice as bright
+    assert exposed(ramp, 50.0) is ramp and exposed(ramp, 0.0) is ramp
+    dark = np.full((8, 8), 10, np.uint8)
+    assert int(exposed(dark, 200.0)[0, 0]) == int(10 * MAX_EXPOSURE_GAIN)
