@@ -104,3 +104,15 @@ def test_a_dim_frame_is_brightened_to_the_exposure_target_and_a_bright_one_kept(
     assert exposed(ramp, 50.0) is ramp and exposed(ramp, 0.0) is ramp
     dark = np.full((8, 8), 10, np.uint8)
     assert int(exposed(dark, 200.0)[0, 0]) == int(10 * MAX_EXPOSURE_GAIN)
+
+
+def test_the_quality_a_supervisor_acts_on() -> None:
+    from landmark_localizer.frames import Estimate, pose_quality
+
+    def estimate(pose, event):
+        return Estimate(0, 'LOST', -1, pose, None, None, 0, event, 0.0)
+
+    assert pose_quality(None) == 'lost'
+    assert pose_quality(estimate(None, 'withheld')) == 'lost'
+    assert pose_quality(estimate(np.zeros(3), 'odometry')) == 'odometry'
+    assert pose_quality(estimate(np.zeros(3), 'absolute')) == 'good'

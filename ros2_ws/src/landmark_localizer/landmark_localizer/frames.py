@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-__all__ = ['MAX_EXPOSURE_GAIN', 'Estimate', 'Frame', 'Stats', 'exposed']
+__all__ = ['MAX_EXPOSURE_GAIN', 'Estimate', 'Frame', 'Stats', 'exposed', 'pose_quality']
 
 #: The most :func:`exposed` brightens a frame.
 MAX_EXPOSURE_GAIN = 4.0
@@ -100,3 +100,21 @@ def exposed(image: np.ndarray, target: float) -> np.ndarray:
     if p99 >= target:
         return image
     return cv2.convertScaleAbs(image, alpha=min(MAX_EXPOSURE_GAIN, target / max(p99, 1)))
+
+
+def pose_quality(estimate: Estimate | None) -> str:
+    """Return what a supervisor can act on for the last frame (``/diagnostics`` ``quality``).
+
+    ``'good'``: a pose from the images; ``'odometry'``: the last pose from the images
+    carried by the odometry (:mod:`landmark_localizer.bridging`), its covariance growing
+    with the path: trust it less as it does, and slow down; ``'lost'``: no pose (none
+    trustworthy, or one withheld because it contradicts the odometry): stop, or give
+    ``/initialpose``.
+
+    Example:
+        >>> pose_quality(None)
+        'lost'
+    """
+    if estimate is None or estimate.pose is None:
+        return 'lost'
+    return 'odometry' if estimate.event == 'odometry' else 'good'

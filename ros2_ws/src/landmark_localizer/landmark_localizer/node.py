@@ -31,7 +31,9 @@ Publishes:
     ``localizer/pose`` (``geometry_msgs/PoseStamped``) and
     ``localizer/pose_with_covariance`` (``PoseWithCovarianceStamped``) in ``map`` with
     the image's stamp; ``localizer/region`` (``std_msgs/Int32``, -1 when LOST);
-    ``diagnostics`` (state, region, features tracked, latency, switches, drops; 1 Hz);
+    ``diagnostics`` (state, region, features tracked, latency, switches, drops, and the
+    pose's ``quality``: ``good`` OK, ``odometry`` WARN, ``lost`` ERROR, with its
+    ``position_std_m``; 1 Hz);
     ``localizer/regions`` (``visualization_msgs/MarkerArray``, transient-local);
     ``map -> odom`` on ``tf`` whenever odometry is present (REP 105, stamped
     ``transform_tolerance`` ahead as AMCL does, and republished every
@@ -62,6 +64,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+import math
 import threading
 import time
 from typing import Any
@@ -85,6 +88,7 @@ from landmark_localizer import conversions
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.frame_worker import FrameWorker
+from landmark_localizer.frames import pose_quality
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.localizer import TRACKING, Localizer
 from landmark_localizer.node_frames import ODOM_MAX_EXTRAPOLATION_S, FrameHandling
@@ -565,9 +569,16 @@ class LocalizerNode(FrameHandling, LifecycleNode):
             'frames_dropped': sum(dropped.values()),
         }
         values.update({f'dropped_{k}': v for k, v in sorted(dropped.items())})
-        level = DiagnosticStatus.OK if state == TRACKING and not problem else \
-            DiagnosticStatus.WARN
+        quality = pose_quality(estimate)
+        cov = estimate.covariance if estimate is not None else None
+        values.update(quality=quality, bridged=loc.stats.bridged, position_std_m=(
+            f'{math.sqrt(max(cov[0, 0], cov[1, 1])):.4f}' if cov is not None else 'nan'))
+        level = {'good': DiagnosticStatus.OK, 'odometry': DiagnosticStatus.WARN,
+                 'lost': DiagnosticStatus.ERROR}[quality]
+        if problem and level == DiagnosticStatus.OK:
+            level = DiagnosticStatus.WARN
         message = f'TRACKING region {loc.region}' if state == TRACKING else 'LOST'
+        message += f' (pose: {quality})'
         if problem:
             message += '; CameraInfo does not match the database'
         self.diag_pub.publish(conversions.diagnostic_array(
