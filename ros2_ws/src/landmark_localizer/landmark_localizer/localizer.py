@@ -519,21 +519,23 @@ class Localizer:
                 np.sqrt(max(est.covariance[0, 0], est.covariance[1, 1])) <= \
                 self.config.max_position_std_m
             if cov_ok and np.all(np.isfinite(est.pose)):
-                camera = est.pose
-                pose = base_pose(self.index, camera)
-                cov = base_covariance(est.covariance, camera, self.index.camera_mount)
-                self.stats.poses += 1
+                seen = base_pose(self.index, est.pose)   # the images' pose drives the state
                 self.last_pose_stamp = frame.stamp_ns
-                self._last_camera = camera
-                self.predictor.add(frame.stamp_ns, pose, frame.odom)
+                self._last_camera = est.pose
+                self.predictor.add(frame.stamp_ns, seen, frame.odom)
                 if solution.two_view_pose is not None:
                     two_view = base_pose(self.index, solution.two_view_pose)
-                pose, cov, kept = self.bridge.fuse(frame.stamp_ns, pose, cov, frame.odom, model,
-                                                   fresh=event in _VOTED)
+                pose, cov, kept = self.bridge.fuse(
+                    frame.stamp_ns, seen,
+                    base_covariance(est.covariance, est.pose, self.index.camera_mount),
+                    frame.odom, model, fresh=event in _VOTED)
                 if kept is not None:
                     self.bridge.anchor(frame.stamp_ns, pose, kept, frame.odom)
                 else:   # the images contradict a sharper odometry: it gives the pose, or
                     event = event or ('odometry' if pose is not None else 'withheld')
+                if pose is not None:   # what is published: the camera of that pose
+                    camera = compose_poses(pose, self.index.camera_mount)
+                    self.stats.poses += 1
         bridged = None if pose is not None or event == 'withheld' else self.bridge.bridge(
             frame.stamp_ns, frame.odom, model)
         if bridged is not None:
