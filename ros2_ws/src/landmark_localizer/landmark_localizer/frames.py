@@ -6,14 +6,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
+from vbn_common.images import MAX_EXPOSURE_GAIN, exposed
+
 __all__ = ['MAX_EXPOSURE_GAIN', 'Estimate', 'Frame', 'Stats', 'exposed', 'pose_quality']
-
-#: The most :func:`exposed` brightens a frame.
-MAX_EXPOSURE_GAIN = 4.0
-
 
 @dataclass(frozen=True)
 class Frame:
@@ -77,29 +74,6 @@ class Stats:
     absolute_poses: int = 0
     bridged: int = 0
     events: dict[str, int] = field(default_factory=dict)
-
-
-def exposed(image: np.ndarray, target: float) -> np.ndarray:
-    """Return a grey frame brightened so that its 99th percentile reaches ``target``.
-
-    An auto-exposure for the features' sake: SIFT's contrast threshold is absolute, so a
-    room lit at half its exploration's light shows half its keypoints, and the votes fail
-    (an L-shaped hall at 0.54x light: 18 to 34 features matched to the database's classes
-    per frame against 80 to 109 as explored). A frame already that bright, or ``target``
-    0, is returned as it is; the gain is at most :data:`MAX_EXPOSURE_GAIN`.
-
-    Example:
-        >>> dim = np.full((4, 4), 50, np.uint8)
-        >>> int(exposed(dim, 200.0)[0, 0]), int(exposed(dim, 0.0)[0, 0])
-        (200, 50)
-    """
-    if target <= 0:
-        return image
-    counts = np.cumsum(cv2.calcHist([image], [0], None, [256], [0, 256]).ravel())
-    p99 = int(np.searchsorted(counts, 0.99 * image.size))
-    if p99 >= target:
-        return image
-    return cv2.convertScaleAbs(image, alpha=min(MAX_EXPOSURE_GAIN, target / max(p99, 1)))
 
 
 def pose_quality(estimate: Estimate | None) -> str:

@@ -23,7 +23,7 @@ import numpy as np
 from landmark_db.workers import available_cores, map_in_processes
 from vbn_common.allocator import reuse_freed_memory
 from vbn_common.errors import VbnCommonError
-from vbn_common.images import EncodedImage, decode_image
+from vbn_common.images import EncodedImage, decode_image, exposed
 
 __all__ = ['ImageFeatures', 'SiftConfig', 'extract_features', 'extract_features_scaled',
            'extract_many']
@@ -170,8 +170,9 @@ def _init_worker(config: SiftConfig) -> None:
     _WORKER['detector'] = config.create()
 
 
-def _init_pool_worker(config: SiftConfig) -> None:
+def _init_pool_worker(config: SiftConfig, exposure: float = 0.0) -> None:
     _init_worker(config)
+    _WORKER['exposure'] = exposure
     reuse_freed_memory()  # SIFT's pyramid would be unmapped and faulted in per image
 
 
@@ -180,14 +181,16 @@ def _extract_encoded(image: EncodedImage) -> ImageFeatures | str:
         gray = decode_image(image)
     except VbnCommonError as error:
         return str(error)
+    if _WORKER.get('exposure', 0.0) > 0:
+        gray = exposed(gray, _WORKER['exposure'])
     return extract_features(gray, _WORKER['config'], _WORKER['detector'])
 
 
 def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig(),
                  workers: int | None = None,
                  progress: Callable[[int], None] | None = None,
-                 check_stop: Callable[[], None] | None = None
-                 ) -> list[ImageFeatures | str]:
+                 check_stop: Callable[[], None] | None = None,
+                 exposure: float = 0.0) -> list[ImageFeatures | str]:
     """Extract the features of many encoded images, in order, over a process pool.
 
     Args:
@@ -197,6 +200,8 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
         progress: Called with the number of images just finished (e.g. a tqdm update).
         check_stop: Called between images, and every half second while the pool works;
             what it raises stops the extraction (the workers are terminated).
+        exposure: Brighten each image whose 99th percentile is below this first
+            (:func:`~vbn_common.images.exposed`; 0: as it is).
 
     Returns:
         Per image, its features, or the one-line reason it could not be decoded.
@@ -207,6 +212,7 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
     results: list[ImageFeatures | str] = []
     if workers == 1 or len(images) < 4:
         _init_worker(config)
+        _WORKER['exposure'] = exposure
         for image in images:
             if check_stop is not None:
                 check_stop()
@@ -216,5 +222,5 @@ def extract_many(images: Sequence[EncodedImage], config: SiftConfig = SiftConfig
         return results
     chunk = max(1, min(16, len(images) // (4 * workers)))
     return map_in_processes(_extract_encoded, images, workers, initializer=_init_pool_worker,
-                            initargs=(config,), chunksize=chunk, progress=progress,
+                            initargs=(config, exposure), chunksize=chunk, progress=progress,
                             check_stop=check_stop)
