@@ -110,6 +110,9 @@ class LocalizerConfig:
         exposure_target: a frame whose 99th percentile of grey is below this is
             brightened to it before its features are found (an auto-exposure: SIFT's
             contrast threshold is absolute; 0: never).
+        health_probes: landmark features of the region, not tracked, searched per
+            frame where the pose puts them, to count the region's landmark failures
+            (:mod:`landmark_localizer.health`; 0: none).
         seed: random generator seed of the robust solvers.
     """
 
@@ -161,6 +164,7 @@ class LocalizerConfig:
     bridge_max_std_m: float = 0.15
     bridge_max_s: float = 5.0
     exposure_target: float = 200.0
+    health_probes: int = 1
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -185,7 +189,7 @@ class LocalizerConfig:
             raise LocalizerError(f'vote_checks must be >= 0, got {self.vote_checks}')
         if self.lk_window % 2 == 0:
             raise LocalizerError(f'lk_window must be odd, got {self.lk_window}')
-        for name in ('scene_tracks', 'scene_window_budget'):
+        for name in ('scene_tracks', 'scene_window_budget', 'health_probes'):
             if getattr(self, name) < 0:
                 raise LocalizerError(f'{name} must be >= 0, got {getattr(self, name)}')
         if self.scene_patch_px < 11 or self.scene_patch_px % 2 == 0:

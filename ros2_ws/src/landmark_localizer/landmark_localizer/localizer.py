@@ -39,6 +39,7 @@ from landmark_localizer.bridging import BridgeModel, OdometryBridge
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.frames import Estimate, Frame, Stats, exposed
+from landmark_localizer.health import RegionHealth
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.points_refinement import refine_on_points
 from landmark_localizer.pose import (
@@ -89,6 +90,7 @@ class Localizer:
         self.bridge = OdometryBridge()
         self.rng = np.random.default_rng(config.seed)
         self.stats = Stats()
+        self.health = RegionHealth()  # per-region landmark failures over the run
         self.state = LOST
         self.region = -1
         self.camera_pose: np.ndarray | None = None
@@ -372,6 +374,13 @@ class Localizer:
             self.tracker.tracks = tracks
             return None, len(tracks), self._failures >= 2
         self._failures = 0
+        nearest, _ = self.index.nearest_pose(base_pose(self.index, solution.estimate.pose))
+        if self.index.region_contains(region.index, np.array([nearest]))[0]:
+            # Evidence on the landmark only inside the region: beyond it, the landmark
+            # need not be visible (Section 3.1).
+            self.health.observe(region.index, region.landmark, found=solution.inlier_classes)
+            if self._handover < 0:
+                self._probe_landmark(image, region, solution.estimate.pose)
         # Keep the inliers, and the incoming region's features no model view of this
         # region judged (they are the next region's to judge).
         keep = np.isin(tracks.class_ids, solution.inlier_classes) | \
@@ -385,6 +394,24 @@ class Localizer:
         self.tracker.scene.update(image, self.camera_pose, state,
                                   config.scene_window_budget - self.tracker.windows)
         return solution, len(tracks), False
+
+    def _probe_landmark(self, image: np.ndarray, region, pose: np.ndarray) -> None:
+        """Search untracked landmark features where ``pose`` puts them (:mod:`.health`)."""
+        missing = np.setdiff1d(region.landmark, self.tracker.tracks.class_ids)
+        uv, ok = self.index.project(pose, missing)
+        missing, uv = missing[ok], uv[ok]
+        count = min(self.config.health_probes, missing.size)
+        if count == 0:
+            return
+        pick = (self._probes + np.arange(count)) % missing.size
+        self._probes += count
+        found = self.tracker.search(image, missing[pick], uv[pick],
+                                    self.config.redetect_radius_px, remember=False)
+        self.health.observe(region.index, region.landmark, found=found.class_ids,
+                            missed=np.setdiff1d(missing[pick], found.class_ids))
+        self.tracker.tracks = self.tracker.tracks.merged(found)
+
+    _probes = 0  # landmark probes so far (round robin over the untracked ones)
 
     def _motion_prior(self, predicted: np.ndarray | None
                       ) -> tuple[np.ndarray, np.ndarray] | None:

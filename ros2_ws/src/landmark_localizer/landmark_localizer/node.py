@@ -33,7 +33,8 @@ Publishes:
     the image's stamp; ``localizer/region`` (``std_msgs/Int32``, -1 when LOST);
     ``diagnostics`` (state, region, features tracked, latency, switches, drops, and the
     pose's ``quality``: ``good`` OK, ``odometry`` WARN, ``lost`` ERROR, with its
-    ``position_std_m``; 1 Hz);
+    ``position_std_m``, and the ``stale_regions`` whose landmark the world no longer
+    shows, :mod:`landmark_localizer.health`; 1 Hz);
     ``localizer/regions`` (``visualization_msgs/MarkerArray``, transient-local);
     ``map -> odom`` on ``tf`` whenever odometry is present (REP 105, stamped
     ``transform_tolerance`` ahead as AMCL does, and republished every
@@ -573,6 +574,8 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         cov = estimate.covariance if estimate is not None else None
         values.update(quality=quality, bridged=loc.stats.bridged, position_std_m=(
             f'{math.sqrt(max(cov[0, 0], cov[1, 1])):.4f}' if cov is not None else 'nan'))
+        stale = loc.health.stale_regions()
+        values['stale_regions'] = ','.join(map(str, stale)) if stale else 'none'
         level = {'good': DiagnosticStatus.OK, 'odometry': DiagnosticStatus.WARN,
                  'lost': DiagnosticStatus.ERROR}[quality]
         if problem and level == DiagnosticStatus.OK:
@@ -581,6 +584,8 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         message += f' (pose: {quality})'
         if problem:
             message += '; CameraInfo does not match the database'
+        if stale:
+            message += f'; {len(stale)} stale region(s): re-explore them (vbn db-update)'
         self.diag_pub.publish(conversions.diagnostic_array(
             self.get_clock().now().to_msg(), 'localizer', loaded.path, level, message,
             values))

@@ -193,6 +193,13 @@ def run(args: argparse.Namespace) -> int:
     events = dict(sorted(stats.events.items())) if stats else {}
     if stats:
         print(f'  events            {events}')
+    health = getattr(localizer, 'health', None)
+    stale = health.stale_regions() if health is not None else []
+    if health is not None:
+        summary = health.summary()
+        print(f'  stale regions     {len(stale)} of {len(summary)} tracked' + (
+            ': ' + ', '.join(f'{r} ({summary[r]["failing"]} of {summary[r]["landmark"]} '
+                             'landmark features failing)' for r in stale) if stale else ''))
     split = {} if args.baseline or args.peer else coverage_split(result, run_bag, localizer.index)
     for name, part in split.items():
         if part['frames']:
@@ -211,7 +218,8 @@ def run(args: argparse.Namespace) -> int:
                        size_bytes=size_bytes, out=str(out), one_core=pinned,
                        wall_seconds=result.wall_seconds, events=events,
                        votes=stats.votes if stats else None, settings=config.as_dict(),
-                       coverage=split,
+                       coverage=split, stale_regions=stale,
+                       region_health=health.summary() if health is not None else None,
                        frames_detail=_frames_detail(result.estimates))
         Path(args.json).write_text(json.dumps(figures, indent=1, default=_json_default))
     return 0
