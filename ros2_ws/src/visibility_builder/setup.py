@@ -31,6 +31,7 @@ setup(
             'estimate-poses = visibility_builder.cli.estimate_poses:register',
             'bench-estimate = visibility_builder.cli.bench_estimate:register',
             'bench-strecha = visibility_builder.cli.bench_strecha:register',
+            'db-update = visibility_builder.cli.db_update:register',
         ],
     },
 )

@@ -1,0 +1,91 @@
+"""The pure parts of ``vbn db-update``: images to poses, blocked poses, labels, merges."""
+from __future__ import annotations
+
+from pathlib import Path
+import sys
+
+import cv2
+import numpy as np
+import scipy.sparse as sp
+
+from landmark_db.database import FeatureClasses, ScenePoints
+from vbn_common.features import ImageFeatures
+from vbn_common.geometry.camera import PinholeCamera
+from visibility_builder.db_update import (
+    UpdateConfig,
+    assign_images,
+    enclosed_poses,
+    label_features,
+)
+from visibility_builder.update_classes import NewClasses, merge_classes, merge_points
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from database_samples import sample_database  # noqa: E402
+
+
+def test_images_go_to_the_pose_they_were_taken_at() -> None:
+    db = sample_database(np.random.default_rng(0))            # 3 x 3 poses, 0.5 m apart
+    xy = db.poses.xy
+    at = np.array([xy[4] + [0.1, -0.1], xy[0], xy[8] + [0.3, 0.0], [50.0, 50.0]])
+    poses = assign_images(db, at, np.zeros(len(at)), tolerance=0.5)
+    assert poses.tolist() == [4, 0, -1, -1]                 # 0.3 m > half the spacing
+
+
+def test_a_pose_surrounded_by_the_update_is_blocked() -> None:
+    grid = np.array([(x, y) for y in range(5) for x in range(5)], float) * 0.25
+    centre = 12                                             # (0.5, 0.5)
+    around = np.setdiff1d(np.arange(25), [centre, 11, 13])  # a 3-pose cupboard
+    blocked = enclosed_poses(grid, around, 0.6)
+    assert blocked.tolist() == [11, 12, 13]
+    # A partial re-exploration of the left half leaves the right half as it is.
+    left = np.flatnonzero(grid[:, 0] <= 0.25)
+    assert enclosed_poses(grid, left, 0.6).size == 0
+
+
+def _features(uv: np.ndarray, descriptors: np.ndarray) -> ImageFeatures:
+    n = len(uv)
+    zeros = np.zeros(n, np.float32)
+    return ImageFeatures(keypoints=uv.astype(np.float32), sizes=zeros + 3, angles=zeros,
+                         responses=zeros, descriptors=descriptors.astype(np.uint8))
+
+
+def test_labels_need_the_right_place_as_well_as_the_right_look() -> None:
+    rng = np.random.default_rng(1)
+    camera = PinholeCamera.from_fov(640, 480, 90.0)
+    # Three classes on a wall 2 m ahead of a camera at the origin looking along +x.
+    points = np.array([[2.0, 0.5, 0.0], [2.0, -0.5, 0.2], [2.0, 0.0, -0.3]])
+    looks = rng.integers(0, 120, (3, 128))
+    classes = FeatureClasses(looks.astype(np.uint8), np.arange(4), sp.csr_matrix(
+        np.ones((1, 3), bool)))
+    from visibility_builder.db_update import _pixels
+
+    uv, ok = _pixels(points, np.zeros(3), camera)
+    assert ok.all()
+    # Feature 0: class 0 where it belongs; feature 1: class 1's look, 80 px from its place
+    # (the poster hung elsewhere); feature 2: class 2 slightly re-imaged, 2 px off.
+    near = np.clip(looks[2] + rng.integers(-3, 4, 128), 0, 255)
+    frame = _features(np.array([uv[0], uv[1] + [80, 0], uv[2] + [2, 0]]),
+                      np.array([looks[0], looks[1], near]))
+    matcher = cv2.BFMatcher(cv2.NORM_L2)
+    matcher.add([classes.descriptors.astype(np.float32)])
+    for visible in (np.ones(3, bool), np.zeros(3, bool)):     # guided and matched alike
+        labels = label_features(frame, np.zeros(3), camera, UpdateConfig(), classes, matcher,
+                                points, visible)
+        assert labels.tolist() == [0, -1, 2]
+
+
+def test_new_classes_are_appended_with_their_points() -> None:
+    old = FeatureClasses(np.zeros((3, 128), np.uint8), np.array([0, 1, 3]),
+                         sp.csr_matrix(np.array([[1, 0], [1, 1], [0, 1]], bool)))
+    new = NewClasses(1, sp.csr_matrix(np.array([[1], [1]], bool)), [],
+                     np.full((2, 128), 7, np.uint8), np.array([0, 2]),
+                     ScenePoints(np.ones((1, 3)), np.array([0]), np.zeros((1, 128), np.uint8),
+                                 np.array([2])))
+    merged = merge_classes(old, old.visibility, new, np.array([1, 2]))
+    assert merged.n_classes == 3 and merged.offsets.tolist() == [0, 1, 3, 5]
+    assert merged.visibility.toarray().tolist() == [[True, False, False], [True, True, True],
+                                                    [False, True, True]]
+    points = merge_points(ScenePoints(np.zeros((1, 3)), np.array([1]),
+                                      np.zeros((1, 128), np.uint8), np.array([3])),
+                          new.points, 2)
+    assert points.class_ids.tolist() == [1, 2]
