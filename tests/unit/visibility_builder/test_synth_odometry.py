@@ -69,3 +69,27 @@ def test_kidnapping_leaves_no_trace_in_odometry(run):
     position, _ = _errors(kid, odom)
     at = np.searchsorted(odom.times, kid.teleport_time)
     assert position[at + 5] > position[at - 5] + 1.0  # the ground truth jumped away
+
+
+def test_a_slipping_wheel_runs_ahead_by_a_fifth_of_the_path_in_its_window(run):
+    from dataclasses import replace
+
+    clean = simulate_odometry(run, noise=OdometryNoise.none())
+    slipping = simulate_odometry(run, noise=replace(OdometryNoise.none(), slip=((10.0, 11.0),)))
+    step = np.linalg.norm(np.diff(clean.poses[:, :2], axis=0), axis=1)
+    slipped = np.linalg.norm(np.diff(slipping.poses[:, :2], axis=0), axis=1)
+    inside = (clean.times[:-1] + 0.01 >= 10.0) & (clean.times[:-1] + 0.01 < 11.0)
+    assert step[inside].sum() > 0.1
+    np.testing.assert_allclose(slipped[inside], 1.2 * step[inside], rtol=1e-5)  # arcs: chords
+    np.testing.assert_allclose(slipped[~inside], step[~inside], rtol=1e-9, atol=1e-12)
+
+
+def test_run_rates_and_faults_are_checked():
+    from visibility_builder.errors import VisibilityBuilderError
+    from visibility_builder.synthesis.bags import BagSpec
+
+    BagSpec(kind='run', rate_hz=2.0, slip_bursts=3, odom_dropouts=3).check()
+    for bad in (dict(kind='run', rate_hz=3.0), dict(kind='run', rate_hz=100.0),
+                dict(kind='exploration', slip_bursts=1), dict(kind='run', odom_dropouts=-1)):
+        with pytest.raises(VisibilityBuilderError):
+            BagSpec(**bad).check()

@@ -104,6 +104,13 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--path-seed', type=int, default=None, metavar='N',
                         help="varies a run's path (default: --seed; 0: the scene's own "
                              'path)')
+    parser.add_argument('--rate', type=float, default=10.0, metavar='HZ',
+                        help="a run's camera rate (default 10; 50 divided by a whole "
+                             'number: 5, 2, 1)')
+    parser.add_argument('--slip', type=int, default=0, metavar='N',
+                        help="a run's wheels slip N times for a second (odometry +20 %%)")
+    parser.add_argument('--odom-dropouts', type=int, default=0, metavar='N',
+                        help="a run's odometry is missing N times for a second")
     parser.add_argument('--snapshot', type=float, nargs=3, metavar=('X', 'Y', 'YAW'),
                         default=None,
                         help='write one image from pose (X, Y, YAW in degrees) as PNG to '
@@ -194,7 +201,9 @@ def run(args: argparse.Namespace) -> int:
                    jpeg_quality=args.jpeg_quality, effects=effects,
                    run=RunParameters(max_speed=args.speed), duration=args.duration,
                    odometry=args.odometry, drift=args.drift,
-                   changes=_changes(args, scene), path_seed=args.path_seed)
+                   changes=_changes(args, scene), path_seed=args.path_seed,
+                   rate_hz=args.rate, slip_bursts=args.slip,
+                   odom_dropouts=args.odom_dropouts)
     if args.save_changes is not None and spec.changes is not None:
         from landmark_db.jsonio import write_json_atomic
 

@@ -127,6 +127,11 @@ class BagSpec:
         changes: the world on the day of the recording, when it changed after the
             exploration (:mod:`.world_changes`: furniture, posters, light, people).
         path_seed: varies a run's path (None: ``seed``; 0: the scene's own path).
+        rate_hz: a run's camera rate, Hz (50 divided by a whole number: 10, 5, 2, 1).
+        slip_bursts: a run's odometry slips (+20 %, :class:`OdometryNoise`) this many
+            times, for a second each, at times drawn from ``seed``.
+        odom_dropouts: a run's odometry (``/odom`` and ``odom -> base_link``) is missing
+            this many times, for a second each, at times drawn from ``seed``.
     """
 
     kind: str = 'exploration'
@@ -154,6 +159,9 @@ class BagSpec:
     drift: float = 1.0
     changes: WorldChanges | None = None
     path_seed: int | None = None
+    rate_hz: float = 10.0
+    slip_bursts: int = 0
+    odom_dropouts: int = 0
 
     def check(self) -> None:
         """Raise :class:`VisibilityBuilderError` for an invalid field."""
@@ -180,6 +188,16 @@ class BagSpec:
             raise VisibilityBuilderError(f'drift must be 0 to 100, got {self.drift}')
         if self.headings is not None and self.kind != 'exploration':
             raise VisibilityBuilderError('headings are for explorations only')
+        per_image = 1e9 / ODOM_PERIOD_NS / self.rate_hz if self.rate_hz > 0 else 0.0
+        if not (math.isfinite(per_image) and per_image >= 1
+                and abs(per_image - round(per_image)) < 1e-9):
+            raise VisibilityBuilderError(f'rate must be 50 Hz divided by a whole number, '
+                                         f'got {self.rate_hz}')
+        if self.kind == 'exploration' and (self.rate_hz != 10.0 or self.slip_bursts
+                                           or self.odom_dropouts):
+            raise VisibilityBuilderError('rate, slip and odometry dropouts are for runs')
+        if not 0 <= self.slip_bursts <= 100 or not 0 <= self.odom_dropouts <= 100:
+            raise VisibilityBuilderError('slip bursts and odometry dropouts must be 0 to 100')
         for name in ('camera_pitch_deg', 'camera_roll_deg'):
             if not (math.isfinite(getattr(self, name)) and abs(getattr(self, name)) <= 45):
                 raise VisibilityBuilderError(f'{name.replace("_deg", "")} must be within 45 '
@@ -422,18 +440,27 @@ def _write_driven(bag: _Bag, driven: DrivenExploration, spec: BagSpec,
 def _write_run(bag: _Bag, trajectory: Trajectory, spec: BagSpec,
                write_image: Callable[[int, int, np.ndarray], None],
                progress: Callable[[int, int], None] | None) -> int:
-    odom = simulate_odometry(trajectory, 1e9 / ODOM_PERIOD_NS, spec.odometry_noise,
+    faults = np.random.default_rng([spec.seed, 2_000_003])
+    slip, missing = (tuple((float(s), float(s) + 1.0) for s in np.sort(faults.uniform(
+        0.5, max(trajectory.duration - 1.5, 0.5), n))) for n in (spec.slip_bursts,
+                                                                 spec.odom_dropouts))
+    odom = simulate_odometry(trajectory, 1e9 / ODOM_PERIOD_NS,
+                             replace(spec.odometry_noise, slip=slip),
                              np.random.default_rng([spec.seed, 1_000_003]))
     n_odom = len(odom.times)
-    per_image = IMAGE_PERIOD_NS // ODOM_PERIOD_NS
+    image_period = int(round(1e9 / spec.rate_hz))
+    per_image = image_period // ODOM_PERIOD_NS
     n_images = (n_odom - 1) // per_image + 1
-    ground_truth = trajectory.pose_at(np.arange(n_images) * IMAGE_PERIOD_NS / 1e9)
+    ground_truth = trajectory.pose_at(np.arange(n_images) * image_period / 1e9)
     for k in range(n_odom):  # time order: odometry, then the image at the same stamp
         stamp = START_NS + k * ODOM_PERIOD_NS
-        bag.write(names.ODOM, stamp, messages.odometry_message(
-            stamp, odom.poses[k], odom.twist[k], odom.pose_variance[k], odom.twist_variance))
-        transforms = [messages.planar_transform(stamp, names.ODOM_FRAME, names.BASE_FRAME,
-                                                odom.poses[k])]
+        lost = any(start <= odom.times[k] < end for start, end in missing)
+        if not lost:
+            bag.write(names.ODOM, stamp, messages.odometry_message(
+                stamp, odom.poses[k], odom.twist[k], odom.pose_variance[k],
+                odom.twist_variance))
+        transforms = [] if lost else [messages.planar_transform(
+            stamp, names.ODOM_FRAME, names.BASE_FRAME, odom.poses[k])]
         if k % per_image == 0:
             i = k // per_image
             # map -> odom such that map -> odom -> base_link is the ground truth now.
@@ -444,6 +471,6 @@ def _write_run(bag: _Bag, trajectory: Trajectory, spec: BagSpec,
             write_image(i, stamp, ground_truth[i])
             if progress:
                 progress(i + 1, n_images)
-        else:
+        elif transforms:
             bag.write(names.TF, stamp, messages.tf_message(transforms))
     return n_images

@@ -11,6 +11,10 @@ starts, so ``map -> odom`` is the first ground-truth pose. The error therefore g
 with the distance driven, as real odometry does. A teleport (kidnapped robot) does
 not turn the wheels and leaves no trace in the odometry.
 
+Wheel slip (``slip`` windows): in each, both wheels' measured speeds are ``1 +
+slip_scale`` times what the robot moves (the wheels spin on a smooth floor), so the
+odometry runs ahead by that share of the path driven in the window.
+
 The covariance reported with each pose is a simple model of that growth, not a
 propagated estimate: per step the variance in ``x`` and ``y`` grows by
 ``(k_trans * ds)^2`` and in yaw by ``(k_rot * |dtheta| + k_drift * ds)^2``.
@@ -38,12 +42,16 @@ class OdometryNoise:
         scale_error: standard deviation of each wheel's constant scale error.
         speed_noise: standard deviation of the per-sample relative speed noise.
         speed_noise_floor: standard deviation of additive speed noise, m/s.
+        slip: ``(start, end)`` seconds of the windows where the wheels slip.
+        slip_scale: how much faster the slipping wheels turn than the robot moves.
     """
 
     wheel_base: float = 0.35
     scale_error: float = 0.003
     speed_noise: float = 0.02
     speed_noise_floor: float = 0.002
+    slip: tuple[tuple[float, float], ...] = ()
+    slip_scale: float = 0.2
 
     @staticmethod
     def none() -> OdometryNoise:
@@ -108,6 +116,13 @@ def simulate_odometry(trajectory: Trajectory, rate_hz: float = 50.0,
     floor = rng.normal(0.0, noise.speed_noise_floor, size=(steps, 2))
     left_m = left * scale[0] * (1 + rel[:, 0]) + floor[:, 0] * (np.abs(left) > 1e-6)
     right_m = right * scale[1] * (1 + rel[:, 1]) + floor[:, 1] * (np.abs(right) > 1e-6)
+    if noise.slip:
+        middle = times[:-1] + dt / 2
+        slipping = np.zeros(steps, bool)
+        for start, end in noise.slip:
+            slipping |= (middle >= start) & (middle < end)
+        left_m = np.where(slipping, left_m * (1 + noise.slip_scale), left_m)
+        right_m = np.where(slipping, right_m * (1 + noise.slip_scale), right_m)
     v = 0.5 * (left_m + right_m)
     w = (right_m - left_m) / b
     # Integrate: exact arc per step.
