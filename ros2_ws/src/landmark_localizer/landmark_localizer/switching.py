@@ -65,7 +65,9 @@ class MotionPredictor:
 
     def velocity(self) -> np.ndarray | None:
         """(vx, vy, vyaw) in ``map`` per second, or None without enough history."""
-        if len(self.odom) >= 2 and len(self.poses) >= 1:
+        # The odometry's velocity where it reaches the last pose (not across a dropout).
+        if len(self.odom) >= 2 and len(self.poses) >= 1 and \
+                self.odom[-1][0] == self.poses[-1][0]:
             (t0, a), (t1, b) = self.odom[0], self.odom[-1]
             dt = (t1 - t0) / 1e9
             if dt > 0:
