@@ -8,7 +8,8 @@ Per scene (``room``, ``hall``: an L-shaped hall drawn per seed, ``floor``: the 2
 floor, long) the database is built from its exploration as it was (``bags/`` for the
 room, else rendered into ``--out``), then each run of
 :data:`landmark_localizer.bench.worlds.RUNS` is rendered (a path per seed; the world
-unchanged, changed, dim, bright, with people, kidnapped; and the changed run again
+unchanged, changed, dim, bright, with people, kidnapped, with bad odometry at 10 and
+2 Hz; and the changed run again
 against the database updated by ``vbn db-update`` with an exploration of the changed
 world) and localized in this process with no initial pose. Per run it prints frames
 posed, translation median and p95, poses more than 50 cm off, the share of poses within
@@ -38,7 +39,8 @@ def register(subparsers: Any) -> None:
         'bench-integrity', help='integrity of the poses (within 3 sigma, none 50 cm off), '
                                 'start-up and recovery, in worlds that changed',
         description="Build each scene's database from its exploration, render runs on "
-                    'other days (unchanged, changed, dim, bright, with people, kidnapped), '
+                    'other days (unchanged, changed, dim, bright, with people, kidnapped, '
+                    'with wheel slip and odometry dropouts at 10 and 2 Hz), '
                     'the changed run against the database updated by vbn db-update, '
                     'and localize them; print the integrity figures against the targets.')
     parser.add_argument('--out', default='out/bench_integrity', help='output directory')
@@ -47,7 +49,7 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--seeds', default='1,2', help='comma-separated seeds (default 1,2)')
     parser.add_argument('--runs', default=None,
                         help='comma-separated subset of unchanged, changed, dim, bright, '
-                             'people, kidnapped, updated (default all)')
+                             'people, kidnapped, updated, faults, faults_2hz (default all)')
     parser.add_argument('--set', dest='settings', action='append', default=[],
                         metavar='NAME=VALUE', help='localizer setting (repeatable)')
     parser.set_defaults(func=run)
