@@ -158,7 +158,7 @@ class LocalizerConfig:
     scene_search_deg: float = 1.75
     scene_patch_px: int = 31
     scene_max_move_m: float = 0.4
-    bridge_std_per_m: float = 0.05
+    bridge_std_per_m: float = 0.08
     bridge_yaw_deg_per_m: float = 2.0
     bridge_yaw_std_per_rad: float = 0.05
     bridge_max_std_m: float = 0.15

@@ -327,7 +327,12 @@ class Localizer:
 
     # -- TRACKING -------------------------------------------------------------------------
     def _predicted_camera(self, frame: Frame) -> np.ndarray | None:
-        """Return where the camera is now: the odometry's motion since, else constant velocity."""
+        """Return where the camera is now: the odometry's motion since, else constant velocity.
+
+        Without either (the first frame after a vote, with no odometry) the last pose
+        itself, and :meth:`_motion_prior` then holds nothing to it.
+        """
+        self._moving = True
         if self.camera_pose is None:
             return None
         moved = self.predictor.by_odometry(frame.odom)
@@ -335,11 +340,13 @@ class Localizer:
             return compose_poses(moved, self.index.camera_mount)
         v = self.predictor.velocity()
         if v is None or self.last_pose_stamp is None:
+            self._moving = False
             return self.camera_pose
         dt = (frame.stamp_ns - self.last_pose_stamp) / 1e9
         return self.camera_pose + v * dt
 
     last_pose_stamp: int | None = None
+    _moving = True  # the prediction has a motion model behind it
     _last_solution: PoseSolution | None = None
 
     def _track(self, image: np.ndarray, frame: Frame
@@ -426,7 +433,8 @@ class Localizer:
         the constant velocity did not foresee moves the prediction by centimetres.
         """
         config = self.config
-        if predicted is None or config.motion_prior_m <= 0 or config.motion_prior_deg <= 0:
+        if predicted is None or not self._moving or config.motion_prior_m <= 0 or \
+                config.motion_prior_deg <= 0:
             return None
         moved = np.zeros(3) if self.camera_pose is None else \
             np.abs(np.asarray(predicted[:3], float) - self.camera_pose[:3])
