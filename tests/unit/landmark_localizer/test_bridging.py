@@ -89,6 +89,11 @@ def test_a_vague_pose_that_contradicts_a_sharp_odometry_gives_way_to_it() -> Non
     pose, published, kept = carried.fuse(2 * S, moved, sharp, later, MODEL)
     np.testing.assert_array_equal(pose, moved)
     np.testing.assert_array_equal(kept, sharp)
+    # A weak one (an absolute pose while no region verifies) neither wins nor confirms:
+    # two look-alike frames in a row agreeing on the wrong place stay unpublished.
+    looked = _anchored()
+    assert looked.fuse(S, image, sharp, odom, MODEL, weak=True) == (None, None, None)
+    assert looked.fuse(2 * S, moved, sharp, later, MODEL, weak=True) == (None, None, None)
     # A fresh vote wins at once, its covariance grown by the disagreement.
     pose, published, kept = _anchored().fuse(S, image, image_cov, odom, MODEL, fresh=True)
     np.testing.assert_array_equal(pose, image)

@@ -94,7 +94,8 @@ class OdometryBridge:
         return self._predict(stamp_ns, odom, model, commit=True)
 
     def fuse(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
-             odom: np.ndarray | None, model: BridgeModel, fresh: bool = False
+             odom: np.ndarray | None, model: BridgeModel, fresh: bool = False,
+             weak: bool = False
              ) -> tuple[np.ndarray | None, np.ndarray | None, np.ndarray | None]:
         """Return a pose from the images joined with the odometry's prediction of it.
 
@@ -115,7 +116,11 @@ class OdometryBridge:
           slipped. One sharp wrong pose (an absolute pose 60 cm off on look-alike
           posters, claiming 0.8 cm) is never published;
         - a ``fresh`` one (a region found anew by its features' votes: the robot may
-          have been carried away) wins at once, its covariance grown by ``nu nu^T``.
+          have been carried away) wins at once, its covariance grown by ``nu nu^T``;
+        - a ``weak`` one (an absolute pose from the class points while no region
+          verifies) neither wins nor confirms a rival: on a changed room's look-alike
+          posters two consecutive absolute poses agreed on a place 60 cm off (claiming
+          1.2 cm), and a robot truly carried away is found by the next votes.
 
         Unchanged without an anchor or once the prediction is too wide to judge by
         (``max_std_m``).
@@ -152,12 +157,14 @@ class OdometryBridge:
             self._rival = None
             wide = covariance + np.outer(nu, nu)
             return pose, wide, wide
-        if sharp and self._confirms(pose, covariance, odom):
+        if sharp and not weak and self._confirms(pose, covariance, odom):
             self._rival = None
             return pose, covariance, covariance
         held = self._predict(stamp_ns, odom, model, commit=True)
         if not sharp:
             return held[0], held[1], None
+        if weak:
+            return None, None, None
         self._rival = (pose, covariance, np.asarray(odom, float))
         return None, None, None
 

@@ -44,6 +44,7 @@ __all__ = ['DatabaseIndex', 'RegionData', 'ViewData']
 #: neighbours fetched per query (enough to find the nearest descriptor of another class:
 #: a class has about four).
 _FLANN_KDTREE = 1
+FLANN_SEED = 0
 FLANN_TREES = 4
 FLANN_NEIGHBOURS = 8
 
@@ -140,8 +141,7 @@ class DatabaseIndex:
         self._by_class = np.argsort(self.descriptor_class, kind='stable')
         self._starts = np.searchsorted(self.descriptor_class[self._by_class],
                                        np.arange(self.n_classes + 1))
-        self._flann = cv2.flann_Index(self.descriptors, {'algorithm': _FLANN_KDTREE,
-                                                         'trees': FLANN_TREES})
+        self._flann = _kd_forest(self.descriptors)
         self.membership: sp.csr_matrix = database.membership.tocsr()  # (classes, regions)
         self.regions = tuple(self._region(i, r) for i, r in enumerate(database.regions))
         self.region_poses: sp.csr_matrix = database.region_poses.tocsr()  # (regions, poses)
@@ -170,9 +170,7 @@ class DatabaseIndex:
         scene = database.points
         self.scene_xyz = np.asarray(scene.xyz, float)
         self.scene_class = np.asarray(scene.class_ids, np.int64)
-        self._scene_flann = cv2.flann_Index(
-            scene.descriptors.astype(np.float32), {'algorithm': _FLANN_KDTREE,
-                                                   'trees': FLANN_TREES}) \
+        self._scene_flann = _kd_forest(scene.descriptors.astype(np.float32)) \
             if scene.n_points >= 2 else None
 
     @property
@@ -397,6 +395,17 @@ class DatabaseIndex:
             uv[ok] = proj
             ok[ok] = valid
         return uv, ok
+
+
+def _kd_forest(descriptors: np.ndarray) -> cv2.flann_Index:
+    """Build FLANN's randomized kd-trees the same way every time.
+
+    They draw their split dimensions from OpenCV's global generator, so without a fixed
+    seed the approximate neighbours (and the poses) of a database depended on what the
+    process had drawn before: the same run localized after another gave other figures.
+    """
+    cv2.setRNGSeed(FLANN_SEED)
+    return cv2.flann_Index(descriptors, {'algorithm': _FLANN_KDTREE, 'trees': FLANN_TREES})
 
 
 def _median_spacing(tree: cKDTree, xy: np.ndarray) -> float:

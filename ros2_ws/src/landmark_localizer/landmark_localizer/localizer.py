@@ -574,7 +574,7 @@ class Localizer:
                 pose, cov, kept = self.bridge.fuse(
                     frame.stamp_ns, seen,
                     base_covariance(est.covariance, est.pose, self.index.camera_mount),
-                    frame.odom, model, fresh=event in _VOTED)
+                    frame.odom, model, fresh=event in _VOTED, weak=self.state != TRACKING)
                 if kept is not None:
                     self.bridge.anchor(frame.stamp_ns, pose, kept, frame.odom)
                 else:   # the images contradict a sharper odometry: it gives the pose, or
