@@ -63,3 +63,17 @@ def test_lens_targets_are_the_issues() -> None:
     assert (t.availability, t.translation_median_m, t.translation_p95_m,
             t.heading_median_deg) == (0.95, 0.02, 0.08, 0.5)
     assert LENS_MAX_ERROR_M == 0.5
+
+
+def test_the_demo_load_is_busy_processes_that_go_away() -> None:
+    from landmark_localizer.cli.demo import _busy
+
+    hogs = _busy(2)
+    try:
+        assert len(hogs) == 2 and all(h.poll() is None for h in hogs)
+    finally:
+        for hog in hogs:
+            hog.kill()
+            hog.wait()
+    assert all(h.returncode is not None for h in hogs)
+    assert _busy(0) == []

@@ -24,6 +24,10 @@ shows the estimated and true trajectories over the regions. The last line is
 switching; latency on one core is ``vbn bench-localize``'s); the exit code is 0 only on
 PASS.
 
+``--load N`` runs N busy processes beside the node while the bag plays (a machine busy
+with other work: frames the node cannot take in time are dropped, and the odometry
+bridges them).
+
 ``--camera pinhole`` (or ``fisheye``) renders a pinhole room (90 degrees, plumb_bob
 distortion) or a fisheye room (180 degrees, equidistant) into ``OUT`` first, an
 exploration with 8 headings per position and a run (``vbn render``, :data:`LENS_BAGS`;
@@ -89,7 +93,16 @@ def register(subparsers: Any) -> None:
     parser.add_argument('--rate', type=float, default=1.0, help='playback rate (1.0)')
     parser.add_argument('--timeout', type=float, default=180.0,
                         help='seconds to wait for the node and the recorder to start')
+    parser.add_argument('--load', type=int, default=0, metavar='N',
+                        help='N busy processes beside the node while the bag plays')
     parser.set_defaults(func=run)
+
+
+def _busy(n: int) -> list[subprocess.Popen]:
+    """Start ``n`` processes that keep a CPU busy until killed."""
+    return [subprocess.Popen([sys.executable, '-c', 'while True: pass'],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for _ in range(max(n, 0))]
 
 
 class _Process:
@@ -179,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
     if executable is None:
         raise LocalizerError('the localizer node is not installed (run make setup)')
     processes: list[_Process] = []
+    busy: list[subprocess.Popen] = []
     try:
         t = _step('2/5 start the localizer node')
         ros_args = ['--ros-args', '-p', f'db:={db}']
@@ -198,7 +212,9 @@ def run(args: argparse.Namespace) -> int:
         processes.append(recorder)
         if not recorder.wait_for('recording /localizer/region', args.timeout):
             raise LocalizerError(f'the recorder did not subscribe; see {recorder.log}')
-        t = _step(f'4/5 play {args.run} to the node over DDS')
+        t = _step(f'4/5 play {args.run} to the node over DDS'
+                  + (f' beside {args.load} busy processes' if args.load > 0 else ''))
+        busy = _busy(args.load)
         topics = _played_topics(Path(args.run))
         with (out / 'play.log').open('w') as log:
             played = subprocess.run(
@@ -213,6 +229,9 @@ def run(args: argparse.Namespace) -> int:
         recorder.stop()
         node.stop()
     finally:
+        for hog in busy:
+            hog.kill()
+            hog.wait()
         for process in reversed(processes):
             process.stop()
     _step('5/5 evaluate the recording')
