@@ -95,9 +95,22 @@ def test_a_vague_pose_that_contradicts_a_sharp_odometry_gives_way_to_it() -> Non
     assert looked.fuse(S, image, sharp, odom, MODEL, weak=True) == (None, None, None)
     assert looked.fuse(2 * S, moved, sharp, later, MODEL, weak=True) == (None, None, None)
     # A fresh vote wins at once, its covariance grown by the disagreement.
-    pose, published, kept = _anchored().fuse(S, image, image_cov, odom, MODEL, fresh=True)
+    voted = _anchored()
+    pose, published, kept = voted.fuse(S, image, image_cov, odom, MODEL, fresh=True)
     np.testing.assert_array_equal(pose, image)
     np.testing.assert_allclose(published, image_cov + np.outer(nu, nu))
+    voted.anchor(S, pose, kept, odom)                  # as the localizer does
+    # The doubt stays on what follows (the images agree with the vote whether it found
+    # the robot or a look-alike) until the localizer settles it.
+    agreeing = image + np.array([0.1, 0.0, 0.0])
+    pose, published, kept = voted.fuse(2 * S, agreeing, image_cov, later, MODEL)
+    np.testing.assert_allclose(published, image_cov + np.outer(nu, nu))
+    voted.anchor(2 * S, pose, kept, later)
+    _, bridged = voted.bridge(3 * S, later, MODEL)
+    assert bridged[0, 0] >= nu[0] ** 2
+    voted.settle()
+    pose, published, kept = voted.fuse(4 * S, agreeing, image_cov, later, MODEL)
+    np.testing.assert_allclose(published, image_cov)
 
 
 def test_a_dim_frame_is_brightened_to_the_exposure_target_and_a_bright_one_kept() -> None:

@@ -72,6 +72,11 @@ class OdometryBridge:
         self.path_m = 0.0
         self.turn_rad = 0.0
         self._rival: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.doubt: np.ndarray | None = None
+
+    def settle(self) -> None:
+        """Forget the doubt a vote against the odometry left (:meth:`fuse`)."""
+        self.doubt = None
 
     def anchor(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
                odom: np.ndarray | None) -> None:
@@ -91,7 +96,8 @@ class OdometryBridge:
         Every call integrates the path and the turn since the previous one, so call it
         on every frame without a pose from the images.
         """
-        return self._predict(stamp_ns, odom, model, commit=True)
+        predicted = self._predict(stamp_ns, odom, model, commit=True)
+        return None if predicted is None else (predicted[0], self._doubted(predicted[1]))
 
     def fuse(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
              odom: np.ndarray | None, model: BridgeModel, fresh: bool = False,
@@ -116,7 +122,13 @@ class OdometryBridge:
           slipped. One sharp wrong pose (an absolute pose 60 cm off on look-alike
           posters, claiming 0.8 cm) is never published;
         - a ``fresh`` one (a region found anew by its features' votes: the robot may
-          have been carried away) wins at once, its covariance grown by ``nu nu^T``;
+          have been carried away) wins at once, its covariance grown by ``nu nu^T``.
+          Either the robot was carried or the vote found a look-alike (a changed room:
+          a vote 40 cm off, and 17 tracked frames after it agreeing with it, claiming 2
+          to 4 cm), and the images that follow cannot tell: ``nu nu^T`` stays on every
+          published covariance (the :attr:`doubt`) until :meth:`settle` (the localizer
+          settles it when the next region's features are found where the pose predicts
+          them, or the state is reset);
         - a ``weak`` one (an absolute pose from the class points while no region
           verifies) neither wins nor confirms a rival: on a changed room's look-alike
           posters two consecutive absolute poses agreed on a place 60 cm off (claiming
@@ -137,7 +149,7 @@ class OdometryBridge:
         predicted = self._predict(stamp_ns, odom, model, commit=False)
         if predicted is None:
             self._rival = None
-            return pose, covariance, covariance
+            return pose, self._doubted(covariance), covariance
         nu = pose - predicted[0]
         nu[2] = float(wrap_angle(nu[2]))
         try:
@@ -151,22 +163,26 @@ class OdometryBridge:
             fused = predicted[0] + gain @ nu
             fused[2] = float(wrap_angle(fused[2]))
             updated = (np.eye(3) - gain) @ predicted[1]
-            return fused, covariance, 0.5 * (updated + updated.T)
+            return fused, self._doubted(covariance), 0.5 * (updated + updated.T)
         sharp = np.trace(covariance[:2, :2]) < SHARPER ** 2 * np.trace(predicted[1][:2, :2])
         if fresh:
             self._rival = None
-            wide = covariance + np.outer(nu, nu)
+            self.doubt = np.outer(nu, nu)
+            wide = covariance + self.doubt
             return pose, wide, wide
         if sharp and not weak and self._confirms(pose, covariance, odom):
             self._rival = None
-            return pose, covariance, covariance
+            return pose, self._doubted(covariance), covariance
         held = self._predict(stamp_ns, odom, model, commit=True)
         if not sharp:
-            return held[0], held[1], None
+            return held[0], self._doubted(held[1]), None
         if weak:
             return None, None, None
         self._rival = (pose, covariance, np.asarray(odom, float))
         return None, None, None
+
+    def _doubted(self, covariance: np.ndarray) -> np.ndarray:
+        return covariance if self.doubt is None else covariance + self.doubt
 
     def _confirms(self, pose: np.ndarray, covariance: np.ndarray, odom: np.ndarray) -> bool:
         """Whether the last rival, carried by the odometry to now, agrees with ``pose``."""

@@ -377,9 +377,8 @@ class Localizer:
                 scene=self.tracker.scene.measure(image, solution.estimate.pose))
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
-            if jump > config.max_jump_m:   # kidnapped? then the odometry bridges nothing
+            if jump > config.max_jump_m:   # kidnapped, or features slid onto a look-alike
                 solution = None
-                self.bridge.reset()
         if solution is None:
             self._failures += 1
             self.tracker.tracks = tracks
@@ -515,6 +514,7 @@ class Localizer:
         self.tracker.tracks = tracks.subset(np.isin(tracks.class_ids, new.features))
         self.region, self._handover = target, -1
         self.stats.predicted_switches += 1
+        self.bridge.settle()   # the next region's features are where the pose put them
         self._switched = True
 
     def _search_missing(self, image: np.ndarray, tracks: Tracks, region, pose: np.ndarray,
