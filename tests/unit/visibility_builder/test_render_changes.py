@@ -163,6 +163,11 @@ def test_walkers_stay_in_the_free_space_and_move() -> None:
     moved = np.linalg.norm(people.positions(30.0)[0] - people.positions(0.0)[0], axis=1)
     assert (moved > 0.5).any()
     assert len(people.occluders(3.0)) == 3 * 4
+    # A walker does not stand in the robot: one within half a metre of it is left out.
+    xy, _ = people.positions(3.0)
+    assert len(people.occluders(3.0, xy[0])) == 2 * 4
+    assert len(people.occluders(3.0, xy[0] + [0.2, 0.3])) == 2 * 4
+    assert len(people.occluders(3.0, np.array([-50.0, -50.0]))) == 3 * 4
     np.testing.assert_array_equal(walkers(HALL, 3, seed=7, duration_s=30.0).places[0],
                                   people.places[0])
 

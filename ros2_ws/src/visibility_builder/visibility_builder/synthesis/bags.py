@@ -377,7 +377,7 @@ def write_bag(scene: Scene, spec: BagSpec, out: str | Path,
                 shake = tilt_matrix(float(pitch), float(roll))
             own = {} if shake is None else {'tilt': shake @ mount}   # a lens renderer's
             around = furniture if people is None else \
-                furniture + people.occluders((stamp - START_NS) / 1e9)
+                furniture + people.occluders((stamp - START_NS) / 1e9, pose[:2])
             image = renderer.render(pose, encoding=spec.encoding, effects=spec.effects, rng=rng,
                                     occluders=around if len(around) else None, **own).image
             if spec.compression is None:

@@ -21,6 +21,8 @@ from visibility_builder.render.renderer import Occluders
 __all__ = ['Walkers', 'walkers']
 
 _WIDTH_M, _DEPTH_M = 0.45, 0.28
+#: A walker's centre stays this far from the robot's (half a walker and a robot's radius).
+KEEP_M = 0.5
 
 
 @dataclass(frozen=True)
@@ -51,16 +53,28 @@ class Walkers:
             heading.append(math.atan2(step[1], step[0]) if np.any(step) else 0.0)
         return np.array(xy, float).reshape(-1, 2), np.array(heading)
 
-    def occluders(self, t: float) -> Occluders:
-        """Return the walkers at ``t`` seconds as occluders."""
+    def occluders(self, t: float, robot: np.ndarray | None = None,
+                  keep_m: float = KEEP_M) -> Occluders:
+        """Return the walkers at ``t`` seconds as occluders.
+
+        ``robot``: the robot's position then; a walker whose centre is nearer than
+        ``keep_m`` is left out (people step round a robot, they do not stand in it: a
+        run once started with the camera inside two walkers, blind for three frames).
+        """
         xy, heading = self.positions(t)
+        if robot is not None and len(xy):
+            away = np.linalg.norm(xy - np.asarray(robot, float)[:2], axis=1) >= keep_m
+            xy, heading = xy[away], heading[away]
+            heights, colours = self.heights[away], self.colours[away]
+        else:
+            heights, colours = self.heights, self.colours
         box = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], float) * [_DEPTH_M / 2,
                                                                        _WIDTH_M / 2]
         footprints = []
         for (x, y), yaw in zip(xy, heading):
             c, s = math.cos(yaw), math.sin(yaw)
             footprints.append(box @ np.array([[c, s], [-s, c]]) + [x, y])
-        return Occluders.boxes(footprints, list(self.heights), [tuple(c) for c in self.colours])
+        return Occluders.boxes(footprints, list(heights), [tuple(c) for c in colours])
 
 
 def walkers(scene: Scene, count: int, seed: int, duration_s: float,
