@@ -57,9 +57,9 @@ def test_labels_need_the_right_place_as_well_as_the_right_look() -> None:
     looks = rng.integers(0, 120, (3, 128))
     classes = FeatureClasses(looks.astype(np.uint8), np.arange(4), sp.csr_matrix(
         np.ones((1, 3), bool)))
-    from visibility_builder.db_update import _pixels
+    from vbn_common.geometry.frames import world_points_to_camera
 
-    uv, ok = _pixels(points, np.zeros(3), camera)
+    uv, ok = camera.project(world_points_to_camera(np.zeros(3), 0.0, points))
     assert ok.all()
     # Feature 0: class 0 where it belongs; feature 1: class 1's look, 80 px from its place
     # (the poster hung elsewhere); feature 2: class 2 slightly re-imaged, 2 px off.

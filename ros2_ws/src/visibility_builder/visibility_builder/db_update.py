@@ -64,7 +64,7 @@ from landmark_db.world import WorldInstance
 from vbn_common.errors import VbnCommonError
 from vbn_common.exploration import Exploration, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
-from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
+from vbn_common.geometry.frames import world_points_to_camera
 from visibility_builder.build import BuildConfig, config_from_flat
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.model_views import ImageTable, extra_features, select_model_views
@@ -212,16 +212,6 @@ def _median_spacing(xy: np.ndarray) -> float:
     return float(np.median(distances[:, 1])) or 0.25
 
 
-def _pixels(points: np.ndarray, camera_pose: np.ndarray, camera: Any
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Pixels of scene points (``z`` from the camera height) from a planar camera pose."""
-    x, y, yaw = (float(v) for v in camera_pose[:3])
-    d = np.asarray(points, float).reshape(-1, 3) - np.array([x, y, 0.0])
-    c, s = math.cos(yaw), math.sin(yaw)
-    base = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
-    return camera.project(base @ BASE_TO_CAMERA_ROTATION)
-
-
 def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any,
                    config: UpdateConfig, classes: FeatureClasses,
                    matcher: cv2.DescriptorMatcher, class_points: np.ndarray,
@@ -242,7 +232,8 @@ def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any
         config: Ratio, reprojection and descriptor limits.
         classes: The database's classes (descriptors and their offsets).
         matcher: A matcher trained on ``classes.descriptors`` (float32).
-        class_points: ``(n_classes, 3)`` each class's scene point (NaN: none).
+        class_points: ``(n_classes, 3)`` each class's scene point (NaN: none; ``z``
+            from the camera height).
         near_visible: ``(n_classes,)`` bool, classes the old visibility had at the
             image's pose or a neighbour.
     """
@@ -250,43 +241,49 @@ def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any
     labels = np.full(n, -1, np.int64)
     if n == 0:
         return labels
-    owner = classes.descriptor_classes
+    # Where each class's point falls in this image (NaN and False: no point, or outside).
     has_point = np.all(np.isfinite(class_points), axis=1)
+    uv = np.full((len(class_points), 2), np.nan)
+    shown = np.zeros(len(class_points), bool)
+    if has_point.any():
+        uv[has_point], shown[has_point] = camera.project(
+            world_points_to_camera(camera_pose, 0.0, class_points[has_point]))
+    descriptors = np.asarray(features.descriptors, np.float32)
     pairs: list[tuple[float, int, int]] = []   # (distance, feature, class)
     # Guided: expected classes where their points fall.
-    expected = np.flatnonzero(near_visible & has_point)
+    expected = np.flatnonzero(near_visible & shown)
     if expected.size:
-        uv, valid = _pixels(class_points[expected], camera_pose, camera)
         tree = cKDTree(features.keypoints)
-        descriptors = np.asarray(features.descriptors, np.float32)
-        for c, near in zip(expected[valid], tree.query_ball_point(
-                uv[valid], config.max_reprojection_px), strict=True):
+        for c, near in zip(expected, tree.query_ball_point(uv[expected],
+                                                           config.max_reprojection_px),
+                           strict=True):
             if not near:
                 continue
-            own = np.asarray(classes.descriptors[classes.offsets[c]:classes.offsets[c + 1]],
-                             np.float32)
-            distance = np.linalg.norm(descriptors[near][:, None] - own[None], axis=2).min(1)
+            own = classes.descriptors[classes.offsets[c]:classes.offsets[c + 1]]
+            distance = np.linalg.norm(descriptors[near][:, None] - own[None].astype(np.float32),
+                                      axis=2).min(axis=1)
             best = int(np.argmin(distance))
             if distance[best] <= config.max_descriptor_distance:
                 pairs.append((float(distance[best]), int(near[best]), int(c)))
-    # Matched: the ratio test over every class.
+    # Matched: the ratio test against the nearest descriptor of another class.
+    owner = classes.descriptor_classes
     k = min(8, len(owner))
-    for i, matches in enumerate(matcher.knnMatch(
-            np.asarray(features.descriptors, np.float32), k=k)):
-        if not matches:
-            continue
-        first = int(owner[matches[0].trainIdx])
-        other = next((m.distance for m in matches[1:] if owner[m.trainIdx] != first), None)
-        if other is not None and matches[0].distance >= config.ratio * other:
-            continue
-        if has_point[first]:
-            uv, valid = _pixels(class_points[first], camera_pose, camera)
-            if not valid[0] or np.linalg.norm(uv[0] - features.keypoints[i]) > \
-                    config.max_reprojection_px:
-                continue
-        elif not near_visible[first]:
-            continue
-        pairs.append((float(matches[0].distance), i, first))
+    matches = [m for m in matcher.knnMatch(descriptors, k=k) if m]
+    if matches:
+        rows = np.array([m[0].queryIdx for m in matches])
+        index = np.array([[x.trainIdx for x in m] + [m[0].trainIdx] * (k - len(m))
+                          for m in matches])
+        distance = np.array([[x.distance for x in m] + [np.inf] * (k - len(m))
+                             for m in matches])
+        cls = owner[index]
+        first = cls[:, 0]
+        other = np.where(cls != first[:, None], distance, np.inf).min(axis=1)
+        where = np.linalg.norm(uv[first] - features.keypoints[rows], axis=1)
+        ok = (distance[:, 0] < config.ratio * other) & np.where(
+            has_point[first], shown[first] & (where <= config.max_reprojection_px),
+            near_visible[first])
+        pairs += zip(distance[ok, 0].tolist(), rows[ok].tolist(), first[ok].tolist(),
+                     strict=True)
     # One feature per class and one class per feature (eq. 6.3), closest first.
     taken_class: set[int] = set()
     for _, i, c in sorted(pairs):
@@ -353,23 +350,20 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
             np.asarray(near[int(pose_of[i])].todense()).ravel())
     updated = np.unique(pose_of[list(features)])
     blocked = enclosed_poses(database.poses.xy, updated, config.enclosed_m)
-    rows = old.tolil()
-    lost = kept_classes = 0
-    for pose in updated:
-        seen = np.unique(np.concatenate([labels[i][labels[i] >= 0] for i in features
-                                         if pose_of[i] == pose] or [np.zeros(0, np.int64)]))
-        before = old.indices[old.indptr[pose]:old.indptr[pose + 1]]
-        lost += int(np.setdiff1d(before, seen).size)
-        kept_classes += int(np.intersect1d(before, seen).size)
-        rows.rows[pose] = seen.tolist()
-        rows.data[pose] = [True] * seen.size
-    for pose in blocked:
-        lost += int(old.indptr[pose + 1] - old.indptr[pose])
-        rows.rows[pose], rows.data[pose] = [], []
-    visibility = rows.tocsr().astype(bool)
+    # What the updated poses see now; the blocked ones see nothing; the rest as before.
+    images = sorted(features)
+    seen = [labels[i][labels[i] >= 0] for i in images]
+    now = sp.csr_matrix((np.ones(sum(c.size for c in seen), bool), (
+        np.repeat(pose_of[images], [c.size for c in seen]), np.concatenate(seen))),
+        shape=old.shape)
+    changed = np.zeros(old.shape[0], bool)
+    changed[updated] = changed[blocked] = True
+    unchanged = sp.diags((~changed).astype(np.int8), dtype=np.int8)
+    visibility = (unchanged @ old + now).astype(bool).tocsr()
+    kept_classes = old[changed].multiply(visibility[changed]).nnz
+    lost = old[changed].nnz - kept_classes
 
     say('new classes')
-    images = sorted(features)
     fresh = new_classes(database, updated, images, [features[i] for i in images],
                         [labels[i] for i in images], pose_of, cameras, frames, camera,
                         build_config, config.workers or available_cores())

@@ -80,16 +80,15 @@ def new_classes(database: LandmarkDatabase, updated: np.ndarray, images: Sequenc
         config: The database's build settings.
         workers: Processes for the class matching.
     """
-    local = {int(p): j for j, p in enumerate(updated)}
+    renumber = np.full(database.n_poses, -1, np.int64)   # updated pose -> its row here
+    renumber[updated] = np.arange(len(updated))
     free = [np.flatnonzero(np.asarray(lab) < 0) for lab in labels]
     sub = [_subset(f, keep) for f, keep in zip(features, free, strict=True)]
     frames_of_pose: list[list[int]] = [[] for _ in updated]
     for m, i in enumerate(images):
-        frames_of_pose[local[int(pose_of[i])]].append(m)
-    edges = database.poses.edges
-    inside = np.isin(edges, updated).all(axis=1)
-    sub_edges = np.vectorize(local.get, otypes=[np.int64])(edges[inside]).reshape(-1, 2) \
-        if inside.any() else np.zeros((0, 2), np.int64)
+        frames_of_pose[renumber[pose_of[i]]].append(m)
+    sub_edges = renumber[database.poses.edges]
+    sub_edges = sub_edges[(sub_edges >= 0).all(axis=1)].reshape(-1, 2)
 
     def per_pose(get: Any) -> list[np.ndarray]:
         return [np.concatenate([get(m) for m in members]) for members in frames_of_pose]
@@ -118,7 +117,7 @@ def new_classes(database: LandmarkDatabase, updated: np.ndarray, images: Sequenc
     verified = labels_by_image(frames_of_pose, classes.labels, [len(s) for s in sub])
     remap = np.full(classes.n_classes, -1, np.int64)
     remap[kept] = np.arange(kept.size)
-    image_pose = np.array([local[int(pose_of[i])] for i in images], np.int64)
+    image_pose = renumber[pose_of[np.asarray(images, np.int64)]]
     decode, usable = patch_sources([frames[i] for i in images])
     points = scene_points(verified, sub, cameras[list(images)], camera, kept, config.points,
                           decode, usable)
