@@ -53,7 +53,7 @@ from landmark_localizer.switching import MotionPredictor, TrackedCounts, choose_
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
 from vbn_common.features import SiftConfig, extract_features_scaled
-from vbn_common.geometry.frames import compose_poses
+from vbn_common.geometry.frames import compose_poses, wrap_angle
 
 __all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
 
@@ -336,7 +336,7 @@ class Localizer:
         if self.camera_pose is None:
             return None
         moved = self.predictor.by_odometry(frame.odom)
-        if moved is not None and self.last_pose_stamp == self.predictor.poses[-1][0]:
+        if moved is not None:
             return compose_poses(moved, self.index.camera_mount)
         v = self.predictor.velocity()
         if v is None or self.last_pose_stamp is None:
@@ -437,6 +437,7 @@ class Localizer:
             return None
         moved = np.zeros(3) if self.camera_pose is None else \
             np.abs(np.asarray(predicted[:3], float) - self.camera_pose[:3])
+        moved[2] = abs(float(wrap_angle(moved[2])))   # a turn across +-pi is small
         std = np.array([max(config.motion_prior_m, 0.2 * math.hypot(moved[0], moved[1]))] * 2
                        + [max(math.radians(config.motion_prior_deg), 0.2 * moved[2])])
         return np.asarray(predicted[:3], float), std
