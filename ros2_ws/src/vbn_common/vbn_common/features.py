@@ -181,8 +181,7 @@ def _extract_encoded(image: EncodedImage) -> ImageFeatures | str:
         gray = decode_image(image)
     except VbnCommonError as error:
         return str(error)
-    if _WORKER.get('exposure', 0.0) > 0:
-        gray = exposed(gray, _WORKER['exposure'])
+    gray = exposed(gray, _WORKER.get('exposure', 0.0))   # 0: as it is
     return extract_features(gray, _WORKER['config'], _WORKER['detector'])
 
 

@@ -193,10 +193,10 @@ def run(args: argparse.Namespace) -> int:
     events = dict(sorted(stats.events.items())) if stats else {}
     if stats:
         print(f'  events            {events}')
-    health = getattr(localizer, 'health', None)
+    health = getattr(localizer, 'health', None)   # the baseline and the peer have none
     stale = health.stale_regions() if health is not None else []
-    if health is not None:
-        summary = health.summary()
+    summary = health.summary() if health is not None else None
+    if summary is not None:
         print(f'  stale regions     {len(stale)} of {len(summary)} tracked' + (
             ': ' + ', '.join(f'{r} ({summary[r]["failing"]} of {summary[r]["landmark"]} '
                              'landmark features failing)' for r in stale) if stale else ''))
@@ -219,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
                        wall_seconds=result.wall_seconds, events=events,
                        votes=stats.votes if stats else None, settings=config.as_dict(),
                        coverage=split, stale_regions=stale,
-                       region_health=health.summary() if health is not None else None,
+                       region_health=summary,
                        frames_detail=_frames_detail(result.estimates))
         Path(args.json).write_text(json.dumps(figures, indent=1, default=_json_default))
     return 0
