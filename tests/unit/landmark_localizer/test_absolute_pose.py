@@ -174,6 +174,37 @@ def test_absolute_solution_poses_a_frame_from_the_index_points() -> None:
                              truth + [2.0, 0.0, 0.0]) is None
 
 
+def test_the_odometrys_narrow_prediction_lets_fewer_inliers_pose_a_changed_view() -> None:
+    from landmark_localizer.absolute_pose import absolute_solution
+    from landmark_localizer.config import LocalizerConfig
+
+    points, index = _world()
+    truth = np.array([2.3, 1.2, 0.9])
+    rng = np.random.default_rng(11)
+    features, (classes, d1, d2), _, _ = _frame(points, truth, rng)
+    # Posters rehung: all but 10 of the frame's matches point at the wrong class.
+    keep = rng.choice(len(classes), 10, replace=False)
+    wrong = np.setdiff1d(np.arange(len(classes)), keep)
+    classes = classes.copy()
+    classes[wrong] = (classes[wrong] + rng.integers(1, len(points), wrong.size)) % len(points)
+    d1 = d1.copy()
+    d1[wrong] += 10.0   # a right match is the nearer one where two share a class
+    nearest = (classes, d1, d2)
+    config = LocalizerConfig()
+    go = np.random.default_rng(0)
+    assert absolute_solution(index, features, nearest, config, go) is None
+    assert absolute_solution(index, features, nearest, config, go, truth) is None  # 15
+    predicted = truth + np.array([0.02, -0.01, 0.005])   # the bridge, a few cm wide
+    found = absolute_solution(index, features, nearest, config, go, predicted,
+                              min_inliers=8, max_distance=0.1, max_turn=0.02)
+    assert found is not None and found.inliers >= 8
+    assert np.hypot(*(found.estimate.pose[:2] - truth[:2])) < 0.01
+    # A prediction 30 cm away with the same 10 cm window finds nothing there.
+    assert absolute_solution(index, features, nearest, config, go,
+                             truth + np.array([0.3, 0.0, 0.0]), min_inliers=8,
+                             max_distance=0.1, max_turn=0.02) is None
+
+
 def test_tracked_points_polish_a_close_seed_and_reject_a_wrong_one() -> None:
     from landmark_localizer.config import LocalizerConfig
     from landmark_localizer.points_refinement import refine_on_points

@@ -63,7 +63,36 @@ def test_an_agreeing_pose_is_the_weighted_mean_with_the_images_covariance() -> N
     pose, published, kept = _anchored().fuse(S, image, image_cov, odom, MODEL)
     np.testing.assert_allclose(pose, prediction + [0.001, 0.0, 0.0], atol=1e-12)
     np.testing.assert_array_equal(published, image_cov)
-    np.testing.assert_allclose(kept, 0.5 * predicted_cov, atol=1e-15)
+    # The anchor is not the Kalman update (half of each): the prediction carries the
+    # earlier images' errors, so two equal claims stay one claim.
+    np.testing.assert_allclose(kept, predicted_cov, atol=1e-15)
+
+
+def test_the_anchor_never_claims_more_than_either_estimate_nor_shrinks_pose_by_pose() -> None:
+    odom = np.array([0.1, 0.0, 0.0])
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        bridge = _anchored(1e-4)
+        prediction, predicted_cov = bridge.predict(S, odom, MODEL)
+        root = rng.normal(size=(3, 3)) * 0.01
+        image_cov = root @ root.T + np.eye(3) * 1e-6
+        _, _, kept = bridge.fuse(S, prediction, image_cov, odom, MODEL)
+        kalman = predicted_cov - predicted_cov @ np.linalg.solve(
+            predicted_cov + image_cov, predicted_cov)
+        assert np.trace(kept[:2, :2]) <= min(np.trace(image_cov[:2, :2]),
+                                             np.trace(predicted_cov[:2, :2])) + 1e-15
+        assert np.linalg.eigvalsh(kept - kalman).min() >= -1e-12   # never below Kalman's
+    # The same image claim fused frame after frame (the same points fix every pose):
+    # the anchor stays near what one image claims instead of shrinking towards zero.
+    bridge = _anchored(1e-4)
+    image_cov = np.diag([1e-4, 1e-4, 1e-4])
+    for k in range(1, 31):
+        odom_k = np.array([0.001 * k, 0.0, 0.0])
+        prediction, _ = bridge.predict(k * S, odom_k, MODEL)
+        pose, _, kept = bridge.fuse(k * S, prediction, image_cov, odom_k, MODEL)
+        bridge.anchor(k * S, pose, kept, odom_k)
+    # (Kalman updates: the thirty-first of it, 0.18 cm claimed for a 1 cm pose.)
+    assert 0.9e-4 <= kept[0, 0] <= 1.1e-4
 
 
 def test_a_vague_pose_that_contradicts_a_sharp_odometry_gives_way_to_it() -> None:
@@ -134,3 +163,25 @@ def test_the_quality_a_supervisor_acts_on() -> None:
     assert pose_quality(estimate(None, 'withheld')) == 'lost'
     assert pose_quality(estimate(np.zeros(3), 'odometry')) == 'odometry'
     assert pose_quality(estimate(np.zeros(3), 'absolute')) == 'good'
+
+
+def test_the_absolute_pose_is_searched_near_the_odometrys_prediction() -> None:
+    from landmark_localizer.bridging import search_prior
+    from landmark_localizer.config import LocalizerConfig
+
+    config = LocalizerConfig()   # bridge: 8 %/m, 2 deg/m, 15 cm, 5 s; 10 and 15 inliers
+    assert search_prior(OdometryBridge(), S, np.zeros(3), config) is None   # no anchor
+    bridge = _anchored(1e-6)
+    pose, radius, turn, need = search_prior(bridge, S, np.array([0.5, 0.0, 0.0]), config)
+    np.testing.assert_allclose(pose, [0.5, 0.0, 0.0])
+    predicted, cov = bridge.predict(S, np.array([0.5, 0.0, 0.0]), BridgeModel.of(config))
+    assert radius == pytest.approx(3 * math.sqrt(max(cov[0, 0], cov[1, 1])))
+    assert turn == pytest.approx(3 * math.sqrt(cov[2, 2])) and need == 10
+    # Past the bridge's 5 s, the prediction still bounds the search, with more inliers.
+    late = search_prior(bridge, 80 * S, np.array([0.5, 0.0, 0.0]), config)
+    assert late is not None and late[3] == 15
+    assert bridge.predict(80 * S, np.array([0.5, 0.0, 0.0]), BridgeModel.of(config)) is None
+    # Until three deviations pass max_jump_m (0.75 m): 5 m driven is too far.
+    assert search_prior(bridge, 80 * S, np.array([5.0, 0.0, 0.0]), config) is None
+    off = LocalizerConfig(absolute_bridged_min_inliers=0)
+    assert search_prior(bridge, S, np.array([0.5, 0.0, 0.0]), off) is None

@@ -30,7 +30,7 @@ mount already (:class:`~vbn_common.geometry.mount.TiltedCamera`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 import numpy as np
@@ -293,7 +293,8 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
                    threshold: float, sigma: float, min_inliers: int, min_spread: float,
                    tilt_prior: float = 0.0, height_prior: float = 0.0,
                    iterations: int = 256, prior_pose: np.ndarray | None = None,
-                   max_distance: float = math.inf) -> AbsolutePose | None:
+                   max_distance: float = math.inf, max_turn: float = math.inf
+                   ) -> AbsolutePose | None:
     """Robust camera pose from rays to known points; None when nothing trustworthy.
 
     Args:
@@ -310,9 +311,26 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
         prior_pose: (3,) the predicted camera pose, if any: hypotheses further than
             ``max_distance`` from it are not considered.
         max_distance: see ``prior_pose``, metres.
+        max_turn: with ``prior_pose``, how far the heading may be from it (radians):
+            matches whose bearing no pose within both bounds explains are set aside
+            before sampling (among many wrong matches, the few right ones are then
+            drawn together).
     """
     rays = np.asarray(rays, float).reshape(-1, 3)
     points = np.asarray(points, float).reshape(-1, 3)
+    if prior_pose is not None and math.isfinite(max_turn) and math.isfinite(max_distance):
+        kept = _gate(rays, points, np.asarray(prior_pose, float), max_distance,
+                     max_turn + threshold)
+        found = solve_absolute(rays[kept], points[kept], rng, threshold=threshold,
+                               sigma=sigma, min_inliers=min_inliers, min_spread=min_spread,
+                               tilt_prior=tilt_prior, height_prior=height_prior,
+                               iterations=iterations, prior_pose=prior_pose,
+                               max_distance=max_distance)
+        if found is None:
+            return None
+        inliers = np.zeros(len(rays), bool)
+        inliers[np.flatnonzero(kept)[found.inliers]] = True
+        return replace(found, inliers=inliers)
     n = len(rays)
     if n < max(3, min_inliers):
         return None
@@ -418,6 +436,21 @@ def _sample(rays: np.ndarray, points: np.ndarray, rng: np.random.Generator, iter
     return np.concatenate(poses_all), np.concatenate(counts_all)
 
 
+def _gate(rays: np.ndarray, points: np.ndarray, prior: np.ndarray, radius: float,
+          turn: float) -> np.ndarray:
+    """Return ``(n,)`` bool: the matches a pose near ``prior`` can explain.
+
+    Near: within ``radius`` metres and ``turn`` radians; a point ``d`` away moves by
+    ``asin(radius / d)`` in bearing as the camera moves by ``radius``.
+    """
+    v = _predicted(prior[None], points)[0]
+    azimuth = np.arctan2(v[:, 1], v[:, 0]) - np.arctan2(rays[:, 1], rays[:, 0])
+    azimuth = np.abs((azimuth + math.pi) % (2 * math.pi) - math.pi)
+    distance = np.hypot(points[:, 0] - prior[0], points[:, 1] - prior[1])
+    moved = np.arcsin(np.clip(radius / np.maximum(distance, 1e-9), 0.0, 1.0))
+    return azimuth <= moved + turn
+
+
 def _spread(rays: np.ndarray) -> float:
     """Angular extent of the rays' horizontal bearings (the smallest arc holding them)."""
     if len(rays) < 2:
@@ -431,8 +464,9 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
                       nearest: tuple[np.ndarray, np.ndarray, np.ndarray],
                       config: LocalizerConfig, rng: np.random.Generator,
                       prior_pose: np.ndarray | None = None,
-                      scene: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-                      ) -> PoseSolution | None:
+                      scene: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+                      min_inliers: int | None = None, max_distance: float | None = None,
+                      max_turn: float = math.inf) -> PoseSolution | None:
     """Return the frame's camera pose from its matches to the 3-D points, as a solve.
 
     Args:
@@ -445,6 +479,12 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
         prior_pose: (3,) the camera pose the motion predicts from a recent pose, if any.
         scene: ``index.nearest_scene_points`` of the descriptors: the matches to the
             database's scene points (those of dropped classes too).
+        min_inliers: least inliers (default: ``absolute_min_inliers``, twice that
+            without a prior).
+        max_distance: how far from the prior the pose may be, metres (default:
+            ``max_jump_m``).
+        max_turn: ... and its heading, radians (matches no such pose explains are set
+            aside before sampling; default: any heading).
 
     Returns:
         A :class:`~landmark_localizer.pose.PoseSolution` with no model view
@@ -459,7 +499,8 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
         (d1 < config.absolute_ratio * d_other)
     good &= np.all(np.isfinite(xyz[np.maximum(best, 0)]), axis=1)
     rows = np.flatnonzero(good)
-    if rows.size < config.absolute_min_inliers:
+    need = min_inliers or config.absolute_min_inliers * (1 if prior_pose is not None else 2)
+    if rows.size < need:
         return None
     # One keypoint per class: its nearest.
     order = rows[np.lexsort((d1[rows], best[rows]))]
@@ -468,13 +509,13 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
     classes = best[rows]
     rays = base_rays(index.frame_camera.unproject(features.keypoints[rows].astype(float)))
     focal = index.residual_focal
-    need = config.absolute_min_inliers * (1 if prior_pose is not None else 2)
     found = solve_absolute(
         rays, xyz[classes], rng, threshold=config.absolute_threshold_px / focal,
         sigma=0.5 / focal, min_inliers=need,
         min_spread=math.radians(config.absolute_min_spread_deg),
         tilt_prior=math.radians(config.tilt_prior_deg), height_prior=config.height_prior_m,
-        prior_pose=prior_pose, max_distance=config.max_jump_m)
+        prior_pose=prior_pose, max_distance=max_distance or config.max_jump_m,
+        max_turn=max_turn)
     if found is None:
         return None
     x, y, yaw = (float(v) for v in found.pose)

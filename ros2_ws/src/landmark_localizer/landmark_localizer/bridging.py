@@ -27,9 +27,10 @@ import math
 
 import numpy as np
 
+from landmark_localizer.config import LocalizerConfig
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 
-__all__ = ['INNOVATION_LIMIT', 'SHARPER', 'BridgeModel', 'OdometryBridge']
+__all__ = ['INNOVATION_LIMIT', 'SHARPER', 'BridgeModel', 'OdometryBridge', 'search_prior']
 
 #: The 99.9 % quantile of the chi-square distribution with three degrees of freedom.
 INNOVATION_LIMIT = 16.27
@@ -57,6 +58,12 @@ class BridgeModel:
     yaw_std_per_rad: float = 0.05
     max_std_m: float = 0.15
     max_s: float = 5.0
+
+    @classmethod
+    def of(cls, config: LocalizerConfig) -> BridgeModel:
+        """Return the model a localizer's settings give (``bridge_*``)."""
+        return cls(config.bridge_std_per_m, config.bridge_yaw_deg_per_m,
+                   config.bridge_yaw_std_per_rad, config.bridge_max_std_m, config.bridge_max_s)
 
 
 class OdometryBridge:
@@ -98,6 +105,15 @@ class OdometryBridge:
         """
         predicted = self._predict(stamp_ns, odom, model, commit=True)
         return None if predicted is None else (predicted[0], self._doubted(predicted[1]))
+
+    def predict(self, stamp_ns: int, odom: np.ndarray | None, model: BridgeModel,
+                bounded: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return ``(pose, covariance)`` the odometry predicts now, without moving on.
+
+        ``bounded``: None once bridging would stop (``max_std_m``, ``max_s``); otherwise
+        the prediction however wide and old (a prior to search near).
+        """
+        return self._predict(stamp_ns, odom, model, commit=False, bounded=bounded)
 
     def fuse(self, stamp_ns: int, pose: np.ndarray, covariance: np.ndarray,
              odom: np.ndarray | None, model: BridgeModel, fresh: bool = False,
@@ -142,8 +158,9 @@ class OdometryBridge:
             is the image's (consecutive images share their features and map points, so
             their errors are not independent, and a covariance that shrank frame after
             frame as if they were would claim more than it knows), the anchor's the
-            update's; None for the anchor when the anchor stays (the prediction is the
-            pose, or no pose: all three None).
+            covariance intersection of the two (for the same reason: the odometry's
+            prediction carries the earlier images' errors); None for the anchor when the
+            anchor stays (the prediction is the pose, or no pose: all three None).
         """
         pose = np.asarray(pose, float)
         predicted = self._predict(stamp_ns, odom, model, commit=False)
@@ -162,8 +179,7 @@ class OdometryBridge:
             self._rival = None
             fused = predicted[0] + gain @ nu
             fused[2] = float(wrap_angle(fused[2]))
-            updated = (np.eye(3) - gain) @ predicted[1]
-            return fused, self._doubted(covariance), 0.5 * (updated + updated.T)
+            return fused, self._doubted(covariance), _intersection(covariance, predicted[1])
         sharp = np.trace(covariance[:2, :2]) < SHARPER ** 2 * np.trace(predicted[1][:2, :2])
         if fresh:
             self._rival = None
@@ -198,19 +214,23 @@ class OdometryBridge:
             return False
 
     def _predict(self, stamp_ns: int, odom: np.ndarray | None, model: BridgeModel,
-                 commit: bool) -> tuple[np.ndarray, np.ndarray] | None:
+                 commit: bool, bounded: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
         if self._anchor is None or model.max_std_m <= 0 or odom is None or \
                 not np.all(np.isfinite(odom)):
             return None
         stamp0, pose0, cov0, odom0 = self._anchor
-        if not 0 <= (stamp_ns - stamp0) / 1e9 <= model.max_s:
+        age = (stamp_ns - stamp0) / 1e9
+        if age < 0:
             return None
+        # The path and the turn are counted frame by frame, past the bridge's end too.
         odom = np.asarray(odom, float)
         step = compose_poses(invert_pose(self._last_odom), odom)
         path_m = self.path_m + float(np.hypot(step[0], step[1]))
         turn_rad = self.turn_rad + abs(float(wrap_angle(step[2])))
         if commit:
             self.path_m, self.turn_rad, self._last_odom = path_m, turn_rad, odom
+        if bounded and age > model.max_s:
+            return None
         delta = compose_poses(invert_pose(odom0), odom)
         pose = compose_poses(pose0, delta)
         c, s = math.cos(pose0[2]), math.sin(pose0[2])
@@ -225,6 +245,58 @@ class OdometryBridge:
         noise = np.diag([xy_var, xy_var, yaw_std ** 2])
         cov = j_anchor @ cov0 @ j_anchor.T + j_delta @ noise @ j_delta.T
         cov = 0.5 * (cov + cov.T)
-        if math.sqrt(max(cov[0, 0], cov[1, 1])) > model.max_std_m:
+        if bounded and math.sqrt(max(cov[0, 0], cov[1, 1])) > model.max_std_m:
             return None
         return pose, cov
+
+
+def search_prior(bridge: OdometryBridge, stamp_ns: int, odom: np.ndarray | None,
+                 config: LocalizerConfig) -> tuple[np.ndarray, float, float, int] | None:
+    """Return where to look for an absolute pose by the odometry, or None.
+
+    ``(pose, radius_m, turn_rad, least inliers)``: the bridge's prediction and three of
+    its standard deviations. While the bridge lasts, ``absolute_bridged_min_inliers``
+    suffice so near the prediction (a changed world leaves few of the old points:
+    10 right matches among 200 wrong ones); past its end, while three deviations stay
+    within ``max_jump_m``, ``absolute_min_inliers`` (a 2 Hz camera passing a changed
+    stretch otherwise finds no pose until a region verifies). None when
+    ``absolute_bridged_min_inliers`` is 0, without an anchor, or wider than that.
+    """
+    if config.absolute_bridged_min_inliers <= 0:
+        return None
+    model = BridgeModel.of(config)
+    for bounded, need in ((True, config.absolute_bridged_min_inliers),
+                          (False, config.absolute_min_inliers)):
+        predicted = bridge.predict(stamp_ns, odom, model, bounded)
+        if predicted is None:
+            continue
+        pose, cov = predicted
+        radius = 3.0 * math.sqrt(max(cov[0, 0], cov[1, 1]))
+        if radius <= config.max_jump_m:
+            return pose, radius, 3.0 * math.sqrt(cov[2, 2]), need
+    return None
+
+
+def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Return the covariance intersection of two estimates with unknown correlation.
+
+    ``(w a^-1 + (1 - w) b^-1)^-1`` with the weight ``w`` that minimises the position's
+    variance: never smaller than what either estimate alone claims, as a Kalman update
+    would be once the same image points fix pose after pose (the anchor's covariance
+    then shrank frame after frame to a twentieth of a millimetre while the pose was 3 mm
+    off).
+    """
+    try:
+        inverse_a, inverse_b = np.linalg.inv(a), np.linalg.inv(b)
+    except np.linalg.LinAlgError:
+        return a
+    best = a
+    for w in np.linspace(0.0, 1.0, 11):
+        try:
+            joined = np.linalg.inv(w * inverse_a + (1.0 - w) * inverse_b)
+        except np.linalg.LinAlgError:
+            continue
+        if np.trace(joined[:2, :2]) < np.trace(best[:2, :2]):
+            best = joined
+    return 0.5 * (best + best.T)
+

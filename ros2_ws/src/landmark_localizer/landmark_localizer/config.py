@@ -80,6 +80,9 @@ class LocalizerConfig:
             tracked pose refined with the motion prior does not need it).
         absolute_prior_s: a pose at most this old (carried by the motion) bounds the
             absolute pose to ``max_jump_m`` from it.
+        absolute_bridged_min_inliers: while the odometry bridges (no region verifies),
+            an absolute pose within three standard deviations of the bridge's
+            prediction needs only this many inliers (0: the bridge is no prior).
         motion_prior_m: standard deviation of the predicted camera position in the
             refinement of a tracked pose on its classes' points, metres (0: no motion
             prior).
@@ -151,6 +154,7 @@ class LocalizerConfig:
     absolute_huber_px: float = 0.3
     absolute_min_spread_deg: float = 20.0
     absolute_prior_s: float = 3.0
+    absolute_bridged_min_inliers: int = 10
     motion_prior_m: float = 0.02
     motion_prior_deg: float = 1.0
     scene_tracks: int = 40
@@ -182,9 +186,9 @@ class LocalizerConfig:
                      'handover_frames'):
             if getattr(self, name) < 1:
                 raise LocalizerError(f'{name} must be >= 1, got {getattr(self, name)}')
-        if self.absolute_min_inliers < 0:
-            raise LocalizerError(f'absolute_min_inliers must be >= 0, got '
-                                 f'{self.absolute_min_inliers}')
+        for name in ('absolute_min_inliers', 'absolute_bridged_min_inliers'):
+            if getattr(self, name) < 0:
+                raise LocalizerError(f'{name} must be >= 0, got {getattr(self, name)}')
         if self.vote_checks < 0:
             raise LocalizerError(f'vote_checks must be >= 0, got {self.vote_checks}')
         if self.lk_window % 2 == 0:

@@ -35,7 +35,7 @@ import numpy as np
 
 from landmark_db.database import LandmarkDatabase
 from landmark_localizer.absolute_pose import absolute_solution
-from landmark_localizer.bridging import BridgeModel, OdometryBridge
+from landmark_localizer.bridging import BridgeModel, OdometryBridge, search_prior
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.frames import Estimate, Frame, Stats, exposed
@@ -170,8 +170,7 @@ class Localizer:
                 solution, tracked = self._last_solution, len(self.tracker.tracks)
         if event in _VOTED and self.state == TRACKING and solution is not None and \
                 self.config.absolute_min_inliers > 0:
-            # A vote's pose rests on the few features it matched in the model views: the
-            # frame's matches to the class points, near it, pin it better.
+            # The frame's matches to the class points pin a vote's pose better.
             solution = self._absolute_polish(image, frame, solution)
         if self.state == LOST and self.config.absolute_min_inliers > 0:
             solution = self._absolute(image, frame)
@@ -201,17 +200,20 @@ class Localizer:
         prior = None
         if self._last_camera is not None and self.last_pose_stamp is not None and \
                 (frame.stamp_ns - self.last_pose_stamp) / 1e9 <= self.config.absolute_prior_s:
-            # The last pose carried by the odometry (a turn on the spot, seconds of it),
-            # else by the constant velocity.
-            prior = self._last_camera
+            prior = self._last_camera   # carried by the odometry, else the velocity
             base = self.predictor.by_odometry(frame.odom)
             v = self.predictor.velocity()
             if base is not None:
                 prior = compose_poses(base, self.index.camera_mount)
             elif v is not None:
                 prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
+        need, distance, turn = None, None, math.inf
+        searched = search_prior(self.bridge, frame.stamp_ns, frame.odom, self.config)
+        if searched is not None:   # the odometry's prediction: fewer inliers near it
+            base, distance, turn, need = searched
+            prior = compose_poses(base, self.index.camera_mount)
         return absolute_solution(self.index, features, nearest, self.config, self.rng, prior,
-                                 self._scene_matches(features))
+                                 self._scene_matches(features), need, distance, turn)
 
     def _scene_matches(self, features):  # noqa: ANN001, ANN202 - nearest scene points
         """Return this frame's matches to the scene points (computed once), or None.
@@ -557,9 +559,7 @@ class Localizer:
             event = event or 'predicted_switch'
             self._switched = False
         pose = cov = camera = two_view = None
-        c = self.config
-        model = BridgeModel(c.bridge_std_per_m, c.bridge_yaw_deg_per_m,
-                            c.bridge_yaw_std_per_rad, c.bridge_max_std_m, c.bridge_max_s)
+        model = BridgeModel.of(self.config)
         if solution is not None and (self.state == TRACKING or solution.views_used == 0):
             est = solution.estimate
             cov_ok = np.all(np.isfinite(est.covariance)) and \
