@@ -16,6 +16,7 @@ from visibility_builder.db_update import (
     assign_images,
     enclosed_poses,
     label_features,
+    replace_visibility,
 )
 from visibility_builder.update_classes import NewClasses, merge_classes, merge_points
 
@@ -40,6 +41,25 @@ def test_a_pose_surrounded_by_the_update_is_blocked() -> None:
     # A partial re-exploration of the left half leaves the right half as it is.
     left = np.flatnonzero(grid[:, 0] <= 0.25)
     assert enclosed_poses(grid, left, 0.6).size == 0
+
+
+def test_a_blocked_pose_leaves_the_pose_graph_and_no_neighbourhood_through_it() -> None:
+    from landmark_db.decomposition import service
+
+    db = sample_database(np.random.default_rng(0))            # 3 x 3 poses, 0.5 m apart
+    n, m = db.n_poses, db.n_classes
+    # Every pose sees every class but the centre, where a cupboard stands now.
+    visibility = np.ones((n, m), bool)
+    visibility[4] = False
+    visibility = sp.csr_matrix(visibility)
+    through = replace_visibility(db, visibility)
+    around = replace_visibility(db, visibility, np.array([4]))
+    assert through.adjacency[4].nnz == 4 and around.adjacency[4].nnz == 0
+    assert around.adjacency.nnz == through.adjacency.nnz - 8   # its 4 edges, both ways
+    # With rho 1, the centre's neighbours have nothing in common with it: through it,
+    # only the corners are k-coverable; around it, all 8 poses the robot can stand on.
+    assert service(through, [], k=2, rho=1).k_coverable == 4
+    assert service(around, [], k=2, rho=1).k_coverable == 8
 
 
 def _features(uv: np.ndarray, descriptors: np.ndarray) -> ImageFeatures:
@@ -79,8 +99,8 @@ def test_new_classes_are_appended_with_their_points() -> None:
                          sp.csr_matrix(np.array([[1, 0], [1, 1], [0, 1]], bool)))
     new = NewClasses(1, sp.csr_matrix(np.array([[1], [1]], bool)), [],
                      np.full((2, 128), 7, np.uint8), np.array([0, 2]),
-                     ScenePoints(np.ones((1, 3)), np.array([0]), np.zeros((1, 128), np.uint8),
-                                 np.array([2])))
+                     ScenePoints(np.ones((2, 3)), np.array([0, -1]),
+                                 np.zeros((2, 128), np.uint8), np.array([2, 2])))
     merged = merge_classes(old, old.visibility, new, np.array([1, 2]))
     assert merged.n_classes == 3 and merged.offsets.tolist() == [0, 1, 3, 5]
     assert merged.visibility.toarray().tolist() == [[True, False, False], [True, True, True],
@@ -88,4 +108,26 @@ def test_new_classes_are_appended_with_their_points() -> None:
     points = merge_points(ScenePoints(np.zeros((1, 3)), np.array([1]),
                                       np.zeros((1, 128), np.uint8), np.array([3])),
                           new.points, 2)
-    assert points.class_ids.tolist() == [1, 2]
+    assert points.class_ids.tolist() == [1, 2, -1]   # a point of no class stays of none
+
+
+def test_the_update_looks_at_the_points_its_images_show_from_where_they_were_seen() -> None:
+    from visibility_builder.update_classes import SEEN_MARGIN_M, looked_at
+
+    camera = PinholeCamera(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5)
+    # Ahead of a camera at the origin facing +x, 2 m away: seen from around (0, 0).
+    xyz = np.array([[2.0, 0.0, 0.0],     # seen from here: looked at
+                    [2.0, 0.1, 0.1],     # seen from 3 m away (0.2 spread): SIFT's scale
+                    [-2.0, 0.0, 0.0]])   # behind the camera
+    seen = np.array([[0.1, 0.0, 0.2], [3.0, 0.0, 0.2], [0.0, 0.0, 0.2]])
+    points = ScenePoints(xyz, np.full(3, -1), np.zeros((3, 128), np.uint8), np.full(3, 2),
+                         seen_from=seen)
+    origin = np.zeros((1, 3))
+    assert looked_at(points, origin, camera).tolist() == [True, False, False]
+    # Just beyond the spread plus the margin: not looked at.
+    far = np.array([[-(0.2 + SEEN_MARGIN_M + 0.11), 0.0, 0.0]])
+    assert not looked_at(points, far, camera)[0]
+    # A file that does not say where its points were seen from: any camera that shows them.
+    unknown = ScenePoints(xyz, np.full(3, -1), np.zeros((3, 128), np.uint8), np.full(3, 2))
+    assert looked_at(unknown, origin, camera).tolist() == [True, True, False]
+    assert looked_at(points, np.zeros((0, 3)), camera).tolist() == [False] * 3

@@ -22,6 +22,7 @@ import scipy.sparse as sp
 
 from landmark_db.database import FeatureClasses, LandmarkDatabase, ScenePoints
 from vbn_common.features import ImageFeatures
+from vbn_common.geometry.frames import world_points_to_camera
 from visibility_builder.build import BuildConfig
 from visibility_builder.classes import correspondence_classes
 from visibility_builder.filters import retain_good_features
@@ -30,7 +31,12 @@ from visibility_builder.point_patches import patch_sources
 from visibility_builder.scene_points import labels_by_image, scene_points
 from visibility_builder.verification import verify_classes
 
-__all__ = ['NewClasses', 'merge_classes', 'merge_points', 'new_classes', 'select_points']
+__all__ = ['SEEN_MARGIN_M', 'NewClasses', 'looked_at', 'merge_classes', 'merge_points',
+           'new_classes', 'select_points']
+
+#: A scene point is looked at by an update image taken within its images' spread plus
+#: this (metres): the localizer's rule for where a point can be found again.
+SEEN_MARGIN_M = 0.15
 
 
 @dataclass(frozen=True)
@@ -44,7 +50,8 @@ class NewClasses:
             of its features (-1: none), in the image's full feature order.
         descriptors: Representative descriptors, as :class:`FeatureClasses` keeps them.
         offsets: ``(n_classes + 1,)`` their offsets.
-        points: The classes' scene points (class ids ``0 .. n - 1``).
+        points: The scene points of the update's images: the classes' (class ids
+            ``0 .. n - 1``) and the others (class -1).
     """
 
     n_classes: int
@@ -121,8 +128,6 @@ def new_classes(database: LandmarkDatabase, updated: np.ndarray, images: Sequenc
     decode, usable = patch_sources([frames[i] for i in images])
     points = scene_points(verified, sub, cameras[list(images)], camera, kept, config.points,
                           decode, usable)
-    named = points.class_ids >= 0
-    points = select_points(points, named)
     out_labels, cls_list, desc_list, pos_list = [], [], [], []
     for m, (lab, keep) in enumerate(zip(verified, free, strict=True)):
         mapped = np.where(lab >= 0, remap[np.maximum(lab, 0)], -1)
@@ -165,6 +170,31 @@ def merge_classes(old: FeatureClasses, visibility: sp.csr_matrix, new: NewClasse
         sp.hstack([visibility, rows], format='csr').astype(bool))
 
 
+def looked_at(points: ScenePoints, cameras: np.ndarray, camera: Any) -> np.ndarray:
+    """Return ``(n,)`` bool: the points an update image shows, from near where they were seen.
+
+    A point falls inside the image of one of ``cameras`` (``(m, 3)`` camera poses) taken
+    within its ``seen_from`` spread plus ``SEEN_MARGIN_M`` (any camera where a file does
+    not say where its points were seen from). The update's own points replace those:
+    whatever the old ones showed is either seen again (a new point at the same place) or
+    gone (a poster taken down, a cupboard in front of it).
+    """
+    n = points.n_points
+    shown = np.zeros(n, bool)
+    if n == 0 or len(cameras) == 0:
+        return shown
+    seen = np.asarray(points.seen_from, float)
+    known = np.all(np.isfinite(seen), axis=1)
+    for pose in np.asarray(cameras, float).reshape(-1, 3):
+        near = ~known | (np.hypot(seen[:, 0] - pose[0], seen[:, 1] - pose[1])
+                         <= np.where(known, seen[:, 2], 0.0) + SEEN_MARGIN_M)
+        rows = np.flatnonzero(near & ~shown)
+        if rows.size:
+            _, inside = camera.project(world_points_to_camera(pose, 0.0, points.xyz[rows]))
+            shown[rows[inside]] = True
+    return shown
+
+
 def merge_points(old: ScenePoints, new: ScenePoints, offset: int) -> ScenePoints:
     """Return ``old``'s points with ``new``'s appended, their classes shifted by ``offset``."""
     if new.n_points == 0:
@@ -178,7 +208,8 @@ def merge_points(old: ScenePoints, new: ScenePoints, offset: int) -> ScenePoints
     patches = both(old.patches, new.patches)
     return ScenePoints(
         xyz=np.concatenate([old.xyz, new.xyz]),
-        class_ids=np.concatenate([old.class_ids, new.class_ids + offset]),
+        class_ids=np.concatenate([old.class_ids, np.where(new.class_ids >= 0,
+                                                          new.class_ids + offset, -1)]),
         descriptors=np.concatenate([old.descriptors, new.descriptors]),
         views=np.concatenate([old.views, new.views]),
         seen_from=both(old.seen_from, new.seen_from),
