@@ -549,3 +549,52 @@ def test_the_closed_form_jacobian_is_the_residuals_derivative(seed: int) -> None
         numeric = (_residuals(state + step, rays, points)
                    - _residuals(state - step, rays, points)) / 2e-6
         np.testing.assert_allclose(jac[:, :, k], numeric, atol=1e-6)
+
+
+def test_points_measured_by_their_patches_join_the_matches_near_a_prediction() -> None:
+    from dataclasses import replace
+
+    from localizer_samples import HEIGHT, synthetic_database, wall_points
+
+    from landmark_db.database import ScenePoints
+    from landmark_localizer.absolute_pose import absolute_solution
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.index import DatabaseIndex
+    from vbn_common.features import ImageFeatures
+
+    rng = np.random.default_rng(21)
+    xyz = wall_points(rng, 80)
+    database = synthetic_database(rng, wall_points(rng, 20))
+    descriptors = rng.integers(0, 256, (80, 128)).astype(np.uint8)
+    index = DatabaseIndex(replace(database, points=ScenePoints(
+        xyz - [0.0, 0.0, HEIGHT], np.full(80, -1), descriptors, np.full(80, 3))))
+    truth = np.array([2.3, 1.2, 0.9])
+    _, _, seen, uv = _frame(xyz, truth, np.random.default_rng(22))
+    # The frame's SIFT matches: 4 right ones (a changed stretch); the patches measured
+    # where the prediction puts 20 others (to 0.05 px), 3 of them 3 px off.
+    sift = seen[:4]
+    features = ImageFeatures(keypoints=uv[:4].astype(np.float32), sizes=np.ones(4, np.float32),
+                             angles=np.zeros(4, np.float32), responses=np.ones(4, np.float32),
+                             descriptors=descriptors[sift].astype(np.float32))
+    scene = (sift.astype(np.int64), np.full(4, 50.0), np.full(4, np.inf))
+    no_classes = (np.full(4, -1), np.full(4, np.inf), np.full(4, np.inf))
+    from localizer_samples import project
+
+    rows = seen[4:24]
+    measured_uv, _ = project(truth, xyz[rows])
+    measured_uv = measured_uv + np.random.default_rng(23).normal(0, 0.05, measured_uv.shape)
+    measured_uv[:3, 0] += 3.0
+    config = LocalizerConfig()
+    predicted = truth + np.array([0.03, -0.02, 0.01])
+    near = dict(min_inliers=10, max_distance=0.1, max_turn=0.05)
+    go = np.random.default_rng(0)
+    assert absolute_solution(index, features, no_classes, config, go, predicted, scene,
+                             **near) is None                      # 4 matches alone
+    wide = absolute_solution(index, features, no_classes, config, go, predicted, scene,
+                             **near, measured=(measured_uv, rows))
+    tight = absolute_solution(index, features, no_classes, config, go, predicted, scene,
+                              **near, measured=(measured_uv, rows),
+                              huber_px=config.absolute_huber_px)
+    assert wide is not None and tight is not None and tight.inliers >= 20
+    off = [np.hypot(*(s.estimate.pose[:2] - truth[:2])) for s in (wide, tight)]
+    assert off[1] < 0.002 and off[0] > 3 * off[1]   # (6.3 and 1.3 mm)

@@ -293,8 +293,8 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
                    threshold: float, sigma: float, min_inliers: int, min_spread: float,
                    tilt_prior: float = 0.0, height_prior: float = 0.0,
                    iterations: int = 256, prior_pose: np.ndarray | None = None,
-                   max_distance: float = math.inf, max_turn: float = math.inf
-                   ) -> AbsolutePose | None:
+                   max_distance: float = math.inf, max_turn: float = math.inf,
+                   huber: float | None = None) -> AbsolutePose | None:
     """Robust camera pose from rays to known points; None when nothing trustworthy.
 
     Args:
@@ -315,6 +315,8 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
             matches whose bearing no pose within both bounds explains are set aside
             before sampling (among many wrong matches, the few right ones are then
             drawn together).
+        huber: the refinement's Huber threshold, radians (default ``threshold``): a
+            smaller one for measurements good to a few tenths of a pixel.
     """
     rays = np.asarray(rays, float).reshape(-1, 3)
     points = np.asarray(points, float).reshape(-1, 3)
@@ -325,7 +327,7 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
                                sigma=sigma, min_inliers=min_inliers, min_spread=min_spread,
                                tilt_prior=tilt_prior, height_prior=height_prior,
                                iterations=iterations, prior_pose=prior_pose,
-                               max_distance=max_distance)
+                               max_distance=max_distance, huber=huber)
         if found is None:
             return None
         inliers = np.zeros(len(rays), bool)
@@ -349,7 +351,7 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
             continue
         tried.append(poses[j])
         found = _finish(poses[j], rays, points, threshold, sigma, min_inliers, min_spread,
-                        tilt_prior, height_prior)
+                        tilt_prior, height_prior, huber or threshold)
         if found is not None and (prior_pose is None or np.hypot(
                 *(found.pose[:2] - prior_pose[:2])) <= max_distance):
             results.append(found)
@@ -367,13 +369,13 @@ def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generato
 
 def _finish(start: np.ndarray, rays: np.ndarray, points: np.ndarray, threshold: float,
             sigma: float, min_inliers: int, min_spread: float, tilt_prior: float,
-            height_prior: float) -> AbsolutePose | None:
+            height_prior: float, huber: float) -> AbsolutePose | None:
     """Refine a hypothesis on its inliers, re-select them, refine again (or None)."""
     inliers = _coarse_inliers(start[None], rays, points, threshold, tilt_prior,
                               height_prior)[0]
     if inliers.sum() < min_inliers:
         return None
-    found = refine_absolute(start, rays[inliers], points[inliers], threshold, sigma,
+    found = refine_absolute(start, rays[inliers], points[inliers], huber, sigma,
                             tilt_prior, height_prior)
     if found is None:
         return None
@@ -383,7 +385,7 @@ def _finish(start: np.ndarray, rays: np.ndarray, points: np.ndarray, threshold: 
     inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
     if inliers.sum() < min_inliers or _spread(rays[inliers]) < min_spread:
         return None
-    found = refine_absolute(state[:3], rays[inliers], points[inliers], threshold, sigma,
+    found = refine_absolute(state[:3], rays[inliers], points[inliers], huber, sigma,
                             tilt_prior, height_prior)
     if found is None:
         return None
@@ -466,7 +468,9 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
                       prior_pose: np.ndarray | None = None,
                       scene: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
                       min_inliers: int | None = None, max_distance: float | None = None,
-                      max_turn: float = math.inf) -> PoseSolution | None:
+                      max_turn: float = math.inf,
+                      measured: tuple[np.ndarray, np.ndarray] | None = None,
+                      huber_px: float | None = None) -> PoseSolution | None:
     """Return the frame's camera pose from its matches to the 3-D points, as a solve.
 
     Args:
@@ -485,6 +489,11 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
             ``max_jump_m``).
         max_turn: ... and its heading, radians (matches no such pose explains are set
             aside before sampling; default: any heading).
+        measured: ``(uv (m, 2), rows (m,))`` scene points measured in the frame by
+            their patches (:mod:`.map_search`), with ``scene``: they join the matches
+            (and replace a match to the same point).
+        huber_px: the refinement's Huber threshold, pixels (default: the inlier
+            threshold).
 
     Returns:
         A :class:`~landmark_localizer.pose.PoseSolution` with no model view
@@ -500,7 +509,8 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
     good &= np.all(np.isfinite(xyz[np.maximum(best, 0)]), axis=1)
     rows = np.flatnonzero(good)
     need = min_inliers or config.absolute_min_inliers * (1 if prior_pose is not None else 2)
-    if rows.size < need:
+    extra = 0 if measured is None or scene is None else len(measured[1])
+    if rows.size + extra < need:
         return None
     # One keypoint per class: its nearest.
     order = rows[np.lexsort((d1[rows], best[rows]))]
@@ -508,6 +518,12 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
     rows = order[first]
     classes = best[rows]
     rays = base_rays(index.frame_camera.unproject(features.keypoints[rows].astype(float)))
+    if extra:
+        uv, ids = measured
+        other = ~np.isin(classes, ids)
+        classes = np.concatenate([classes[other], np.asarray(ids, np.int64)])
+        rays = np.concatenate([rays[other], base_rays(index.frame_camera.unproject(
+            np.asarray(uv, float).reshape(-1, 2)))])
     focal = index.residual_focal
     found = solve_absolute(
         rays, xyz[classes], rng, threshold=config.absolute_threshold_px / focal,
@@ -515,7 +531,7 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
         min_spread=math.radians(config.absolute_min_spread_deg),
         tilt_prior=math.radians(config.tilt_prior_deg), height_prior=config.height_prior_m,
         prior_pose=prior_pose, max_distance=max_distance or config.max_jump_m,
-        max_turn=max_turn)
+        max_turn=max_turn, huber=None if huber_px is None else huber_px / focal)
     if found is None:
         return None
     x, y, yaw = (float(v) for v in found.pose)

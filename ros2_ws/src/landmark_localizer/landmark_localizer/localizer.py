@@ -41,6 +41,7 @@ from landmark_localizer.errors import LocalizerError
 from landmark_localizer.frames import Estimate, Frame, Stats, exposed
 from landmark_localizer.health import RegionHealth
 from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.map_search import MapSearch
 from landmark_localizer.points_refinement import refine_on_points
 from landmark_localizer.pose import (
     PoseSolution,
@@ -86,6 +87,7 @@ class Localizer:
                                   if k in SiftConfig.__dataclass_fields__})
         self.detector = self.sift.create()
         self.tracker = Tracker(self.index, config, self.detector)
+        self.map_search = MapSearch(self.index, config)
         self.predictor = MotionPredictor()
         self.bridge = OdometryBridge()
         self.rng = np.random.default_rng(config.seed)
@@ -109,6 +111,7 @@ class Localizer:
         self.tracker.reset()
         self.predictor.reset()
         self.bridge.reset()
+        self.map_search.reset()
         self._failures = 0
         self._handover = -1
         self._last_camera = None
@@ -124,6 +127,7 @@ class Localizer:
             self.rng = np.random.default_rng(config.seed)
         self.config = config
         self.tracker.set_config(config)
+        self.map_search.set_config(config)
 
     def reset_motion(self) -> None:
         """Forget the motion history (odometry restarted); the region is kept."""
@@ -207,13 +211,11 @@ class Localizer:
                 prior = compose_poses(base, self.index.camera_mount)
             elif v is not None:
                 prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
-        need, distance, turn = None, None, math.inf
         searched = search_prior(self.bridge, frame.stamp_ns, frame.odom, self.config)
-        if searched is not None:   # the odometry's prediction: fewer inliers near it
-            base, distance, turn, need = searched
-            prior = compose_poses(base, self.index.camera_mount)
-        return absolute_solution(self.index, features, nearest, self.config, self.rng, prior,
-                                 self._scene_matches(features), need, distance, turn)
+        if searched is not None:   # the odometry's prediction: search near it
+            searched = (compose_poses(searched[0], self.index.camera_mount), *searched[1:])
+        return self.map_search.solve(image, features, nearest, self._scene_matches(features),
+                                     self.rng, prior, searched)
 
     def _scene_matches(self, features):  # noqa: ANN001, ANN202 - nearest scene points
         """Return this frame's matches to the scene points (computed once), or None.

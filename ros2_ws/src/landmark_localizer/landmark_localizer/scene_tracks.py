@@ -107,6 +107,11 @@ class SceneTracks:
         return len(self.ids)
 
     @property
+    def measured_ids(self) -> np.ndarray:
+        """Scene point rows of the last :meth:`measure`'s measurements, in its order."""
+        return self.ids[self._measured_rows]
+
+    @property
     def _pixels_per_degree(self) -> float:
         """Of the run's camera (set after the index, as the first CameraInfo comes)."""
         return math.radians(pixels_per_radian(self.index.frame_camera))
