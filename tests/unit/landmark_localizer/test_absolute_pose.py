@@ -598,3 +598,9 @@ def test_points_measured_by_their_patches_join_the_matches_near_a_prediction() -
     assert wide is not None and tight is not None and tight.inliers >= 20
     off = [np.hypot(*(s.estimate.pose[:2] - truth[:2])) for s in (wide, tight)]
     assert off[1] < 0.002 and off[0] > 3 * off[1]   # (6.3 and 1.3 mm)
+    # No SIFT match at all (the ratio test left none): the measurements alone.
+    none = (np.full(4, -1), np.full(4, np.inf), np.full(4, np.inf))
+    alone = absolute_solution(index, features, no_classes, config, go, predicted, none,
+                              **near, measured=(measured_uv, rows),
+                              huber_px=config.absolute_huber_px)
+    assert alone is not None and np.hypot(*(alone.estimate.pose[:2] - truth[:2])) < 0.002

@@ -127,7 +127,8 @@ def test_the_update_looks_at_the_points_its_images_show_from_where_they_were_see
     # Just beyond the spread plus the margin: not looked at.
     far = np.array([[-(0.2 + SEEN_MARGIN_M + 0.11), 0.0, 0.0]])
     assert not looked_at(points, far, camera)[0]
-    # A file that does not say where its points were seen from: any camera that shows them.
+    # A file that does not say where its points were seen from: none looked at (a
+    # panoramic image would show every point of the map).
     unknown = ScenePoints(xyz, np.full(3, -1), np.zeros((3, 128), np.uint8), np.full(3, 2))
-    assert looked_at(unknown, origin, camera).tolist() == [True, True, False]
+    assert looked_at(unknown, origin, camera).tolist() == [False, False, False]
     assert looked_at(points, np.zeros((0, 3)), camera).tolist() == [False] * 3

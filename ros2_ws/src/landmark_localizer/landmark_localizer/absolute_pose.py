@@ -449,7 +449,8 @@ def _gate(rays: np.ndarray, points: np.ndarray, prior: np.ndarray, radius: float
     azimuth = np.arctan2(v[:, 1], v[:, 0]) - np.arctan2(rays[:, 1], rays[:, 0])
     azimuth = np.abs((azimuth + math.pi) % (2 * math.pi) - math.pi)
     distance = np.hypot(points[:, 0] - prior[0], points[:, 1] - prior[1])
-    moved = np.arcsin(np.clip(radius / np.maximum(distance, 1e-9), 0.0, 1.0))
+    moved = np.where(distance <= radius, math.pi,
+                     np.arcsin(np.clip(radius / np.maximum(distance, 1e-9), 0.0, 1.0)))
     return azimuth <= moved + turn
 
 
@@ -514,7 +515,7 @@ def absolute_solution(index: DatabaseIndex, features: ImageFeatures,
         return None
     # One keypoint per class: its nearest.
     order = rows[np.lexsort((d1[rows], best[rows]))]
-    first = np.concatenate([[True], np.diff(best[order]) != 0])
+    first = np.concatenate([[True], np.diff(best[order]) != 0])[:order.size]
     rows = order[first]
     classes = best[rows]
     rays = base_rays(index.frame_camera.unproject(features.keypoints[rows].astype(float)))

@@ -289,7 +289,7 @@ def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     try:
         inverse_a, inverse_b = np.linalg.inv(a), np.linalg.inv(b)
     except np.linalg.LinAlgError:
-        return a
+        return 0.5 * (b + b.T)   # a degenerate image covariance claims nothing to keep
     best = a
     for w in np.linspace(0.0, 1.0, 11):
         try:

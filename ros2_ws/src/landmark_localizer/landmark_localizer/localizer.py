@@ -267,6 +267,7 @@ class Localizer:
 
     def _start(self, found: Verified, frame: Frame) -> None:
         self.state, self.region, self._handover = TRACKING, found.region, -1
+        self.map_search.reset()
         region = self.index.regions[found.region]
         self.tracker.set_region(region)
         tracks = Tracks(found.class_ids, found.uv.astype(np.float32))

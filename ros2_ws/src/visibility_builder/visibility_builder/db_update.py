@@ -381,8 +381,11 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
     # The scene points of no class that the update's images show from near where they
     # were seen give way to the update's own (a rehung poster's old points would pull a
     # pose towards where it hung: room seed 1, p95 1.28 -> 0.24 cm).
+    # (Only when the update triangulated points of its own: a single updated pose has
+    # none, and its images alone tell nothing about the old ones.)
     old_points = database.points
-    stale = (old_points.class_ids < 0) & looked_at(old_points, cameras[images], camera)
+    stale = (old_points.class_ids < 0) & looked_at(old_points, cameras[images], camera) \
+        & (fresh.points.n_points > 0)
     points = merge_points(select_points(old_points, ~stale), fresh.points, n_old)
     # A class no pose sees any more (its poster is gone) keeps its id but loses its point:
     # the localizer would otherwise look for it, or take its texture hung elsewhere.
@@ -392,6 +395,7 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
 
     say('regions')
     world = replace_visibility(database, visibility, blocked)
+    poses = replace(database.poses, edges=world.edges)   # blocked poses' edges gone
     info = database.info
     # A region keeps its poses but the blocked ones; it stays when its landmark is
     # visible from each of them.
@@ -415,7 +419,7 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
             'bag': str(bag), 'utc': utc_now_iso(), 'poses': int(updated.size),
             'regions_rebuilt': int(affected.size), 'regions_added': len(added)}]})
     try:
-        new = LandmarkDatabase(info=updated_info, poses=database.poses,
+        new = LandmarkDatabase(info=updated_info, poses=poses,
                                classes=merged, regions=regions,
                                uncovered=after.unserved, points=points)
     except LandmarkDbError as error:

@@ -174,20 +174,20 @@ def looked_at(points: ScenePoints, cameras: np.ndarray, camera: Any) -> np.ndarr
     """Return ``(n,)`` bool: the points an update image shows, from near where they were seen.
 
     A point falls inside the image of one of ``cameras`` (``(m, 3)`` camera poses) taken
-    within its ``seen_from`` spread plus ``SEEN_MARGIN_M`` (any camera where a file does
-    not say where its points were seen from). The update's own points replace those:
-    whatever the old ones showed is either seen again (a new point at the same place) or
-    gone (a poster taken down, a cupboard in front of it).
+    within its ``seen_from`` spread plus ``SEEN_MARGIN_M``. The update's own points
+    replace those: whatever the old ones showed is either seen again (a new point at the
+    same place) or gone (a poster taken down, a cupboard in front of it). A file that
+    does not say where its points were seen from has none looked at (a panoramic image
+    shows every point of the map).
     """
     n = points.n_points
     shown = np.zeros(n, bool)
-    if n == 0 or len(cameras) == 0:
+    if n == 0 or len(cameras) == 0 or not points.has_seen_from:
         return shown
     seen = np.asarray(points.seen_from, float)
-    known = np.all(np.isfinite(seen), axis=1)
     for pose in np.asarray(cameras, float).reshape(-1, 3):
-        near = ~known | (np.hypot(seen[:, 0] - pose[0], seen[:, 1] - pose[1])
-                         <= np.where(known, seen[:, 2], 0.0) + SEEN_MARGIN_M)
+        near = np.hypot(seen[:, 0] - pose[0], seen[:, 1] - pose[1]) <= seen[:, 2] + \
+            SEEN_MARGIN_M
         rows = np.flatnonzero(near & ~shown)
         if rows.size:
             _, inside = camera.project(world_points_to_camera(pose, 0.0, points.xyz[rows]))
