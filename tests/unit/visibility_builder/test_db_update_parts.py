@@ -112,7 +112,8 @@ def test_new_classes_are_appended_with_their_points() -> None:
 
 
 def test_the_update_looks_at_the_points_its_images_show_from_where_they_were_seen() -> None:
-    from visibility_builder.update_classes import SEEN_MARGIN_M, looked_at
+    from landmark_db.database.points import SEEN_MARGIN_M
+    from visibility_builder.update_classes import looked_at
 
     camera = PinholeCamera(width=640, height=480, fx=500.0, fy=500.0, cx=319.5, cy=239.5)
     # Ahead of a camera at the origin facing +x, 2 m away: seen from around (0, 0).

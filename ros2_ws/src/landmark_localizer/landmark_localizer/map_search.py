@@ -49,14 +49,21 @@ class MapSearch:
 
     def __init__(self, index: DatabaseIndex, config: LocalizerConfig) -> None:
         self.index = index
-        self.set_config(config)
+        self.config = config
+        self.patches = self._tracker(config)
 
     def set_config(self, config: LocalizerConfig) -> None:
-        """Use new settings (a new patch tracker when ``scene_tracks`` changed)."""
+        """Use new settings (a new patch tracker only when scene points turn on or off)."""
+        if (config.scene_tracks > 0) != (self.config.scene_tracks > 0):
+            self.patches = self._tracker(config)
+        elif self.patches is not None:
+            self.patches.config = _widened(config)
         self.config = config
-        wide = replace(config, scene_tracks=SEARCHED * config.scene_tracks)
-        self.patches = PatchTracks(self.index, wide, None) if config.scene_tracks > 0 \
-            and self.index.database.points.has_patches else None
+
+    def _tracker(self, config: LocalizerConfig) -> PatchTracks | None:
+        if config.scene_tracks <= 0 or not self.index.database.points.has_patches:
+            return None
+        return PatchTracks(self.index, _widened(config), None)
 
     def reset(self) -> None:
         """Forget the points measured last (the search resumes elsewhere)."""
@@ -100,3 +107,8 @@ class MapSearch:
         else:   # keep the points the pose explains for the next frame
             self.patches.update(image, found.estimate.pose, None, 0)
         return found
+
+
+def _widened(config: LocalizerConfig) -> LocalizerConfig:
+    return replace(config, scene_tracks=SEARCHED * config.scene_tracks)
+

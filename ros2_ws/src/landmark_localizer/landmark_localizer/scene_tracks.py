@@ -44,6 +44,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from landmark_db.database.points import SEEN_MARGIN_M
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.matching import squared_distances
@@ -53,8 +54,6 @@ from vbn_common.patch_alignment import tile_mosaic
 
 __all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable']
 
-#: A point is searched from at most this far outside its exploration images' spread.
-SEEN_MARGIN_M = 0.15
 #: Grid of image cells that births fill evenly (columns, rows).
 CELLS = (16, 4)
 #: Largest shift of a measurement from the pose's prediction, degrees.

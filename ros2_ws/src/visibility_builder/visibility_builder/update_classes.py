@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from landmark_db.database import FeatureClasses, LandmarkDatabase, ScenePoints
+from landmark_db.database.points import SEEN_MARGIN_M
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.frames import world_points_to_camera
 from visibility_builder.build import BuildConfig
@@ -31,12 +32,8 @@ from visibility_builder.point_patches import patch_sources
 from visibility_builder.scene_points import labels_by_image, scene_points
 from visibility_builder.verification import verify_classes
 
-__all__ = ['SEEN_MARGIN_M', 'NewClasses', 'looked_at', 'merge_classes', 'merge_points',
-           'new_classes', 'select_points']
-
-#: A scene point is looked at by an update image taken within its images' spread plus
-#: this (metres): the localizer's rule for where a point can be found again.
-SEEN_MARGIN_M = 0.15
+__all__ = ['NewClasses', 'looked_at', 'merge_classes', 'merge_points', 'new_classes',
+           'select_points']
 
 
 @dataclass(frozen=True)

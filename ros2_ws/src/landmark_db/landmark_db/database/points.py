@@ -30,7 +30,13 @@ from landmark_db.database.fields import (
 )
 from landmark_db.errors import LandmarkDbError
 
-__all__ = ['ScenePoints']
+__all__ = ['SEEN_MARGIN_M', 'ScenePoints']
+
+#: A scene point can be found again from within its images' spread (``seen_from``) plus
+#: this, metres: SIFT finds a feature at the scales it was seen at. The localizer
+#: searches a point only from there, and an update replaces the points its images show
+#: from there.
+SEEN_MARGIN_M = 0.15
 
 
 @dataclass(frozen=True, eq=False)
