@@ -3,8 +3,9 @@
 The update bag is the first part of ``bags/room_exploration`` (the room as explored:
 nothing changed, so the regions away from it must come through untouched and the
 poses it covers keep almost every class). Bad inputs (a damaged bag, another robot's
-camera, a region left without a model view) leave the database byte for byte as it
-was; a localizer that holds the database keeps working while the file is replaced.
+camera, another place's images, a region left without a model view) leave the database
+byte for byte as it was; a localizer that holds the database keeps working while the
+file is replaced.
 """
 from __future__ import annotations
 
@@ -123,7 +124,21 @@ def test_a_region_left_without_model_view_is_refused(room_db: Path, part_bag: Pa
     monkeypatch.setattr(db_update, 'label_features',
                         lambda features, *a, **k: np.full(len(features), -1, np.int64))
     with pytest.raises(VisibilityBuilderError, match='without a model view'):
-        db_update.update_database(database, part_bag, db_update.UpdateConfig(workers=1))
+        db_update.update_database(database, part_bag, db_update.UpdateConfig(
+            workers=1, min_seen_again=0.0))
+
+
+def test_images_that_show_nothing_the_database_saw_are_another_place(
+        room_db: Path, part_bag: Path, monkeypatch) -> None:
+    from visibility_builder import db_update
+
+    # None of the update's features is a class the database had at its pose (a hall's
+    # exploration against the room's database showed 3 % of them again).
+    monkeypatch.setattr(db_update, 'label_features',
+                        lambda features, *a, **k: np.full(len(features), -1, np.int64))
+    with pytest.raises(VisibilityBuilderError, match=r'show 0 of the \d+ .*another place'):
+        db_update.update_database(open_database(room_db), part_bag,
+                                  db_update.UpdateConfig(workers=1))
 
 
 def test_update_in_place_while_a_localizer_holds_the_database(room_db: Path, part_bag: Path,
