@@ -15,7 +15,9 @@ seed, :func:`run_argv`); the database is built from the scene's exploration as i
 - ``faults_2hz``: the same at a camera rate of 2 Hz;
 - ``updated``: the ``changed`` run against the database updated (``vbn db-update``) with
   an exploration of the changed world (:func:`reexplore_argv`): it should reach the
-  ``unchanged`` run's figures (:data:`UPDATE_FACTOR`).
+  ``unchanged`` run's figures (:data:`UPDATE_FACTOR`), or, where the changed run is
+  harder than the unchanged one, what a database built afresh from that exploration
+  gives on the same run (:data:`REBUILD_FACTOR`, :func:`update_failures`).
 
 Scenes: the shipped ``room`` and ``floor`` (the 25 cm floor; long), and ``hall``, an
 L-shaped hall drawn per seed (:func:`hall_scene`: its pillars and its textures
@@ -29,14 +31,18 @@ import numpy as np
 
 from landmark_db.scene import Scene
 
-__all__ = ['CHANGED_RUNS', 'RUNS', 'UPDATE_FACTOR', 'hall_scene', 'reexplore_argv', 'run_argv',
-           'targets']
+__all__ = ['CHANGED_RUNS', 'REBUILD_FACTOR', 'RUNS', 'UPDATE_FACTOR', 'hall_scene',
+           'reexplore_argv', 'run_argv', 'targets', 'update_failures']
 
 RUNS = ('unchanged', 'changed', 'dim', 'bright', 'people', 'kidnapped', 'updated', 'faults',
         'faults_2hz')
 #: After the update, the changed run's median and p95 are within this factor of the
 #: unchanged run's (of the same scene and seed), and it is posed as often less 1 %.
 UPDATE_FACTOR = 1.5
+#: Or within this factor of the changed run's against a database built afresh from the
+#: update's exploration (the changed run keeps its people and light, and may pass
+#: where the world has less to see: no update can beat a rebuild by much there).
+REBUILD_FACTOR = 1.2
 #: The runs through a world that changed (the issue's 95 % posed, p95 5 cm).
 CHANGED_RUNS = ('changed', 'dim', 'bright', 'people', 'faults', 'faults_2hz')
 
@@ -95,15 +101,27 @@ def reexplore_argv(scene: str, seed: int, shipped: bool) -> list[str]:
             f'random:{seed}', '--compressed']
 
 
-def update_failures(updated: dict[str, Any], unchanged: dict[str, Any]) -> list[str]:
-    """Return how the ``updated`` run falls short of the ``unchanged`` run's figures."""
+def update_failures(updated: dict[str, Any], unchanged: dict[str, Any],
+                    rebuilt: dict[str, Any] | None = None) -> list[str]:
+    """Return how the ``updated`` run falls short of the ``unchanged`` run's figures.
+
+    A figure passes when it is within :data:`UPDATE_FACTOR` of the ``unchanged`` run's
+    or within :data:`REBUILD_FACTOR` of the ``rebuilt`` run's (the same changed run
+    against a database built afresh from the update's exploration), when given.
+    """
     bad = []
-    if updated['posed'] < unchanged['posed'] - 0.01:
-        bad.append(f"posed {updated['posed']:.3f} < unchanged {unchanged['posed']:.3f}")
+    floor = [unchanged] + ([rebuilt] if rebuilt is not None else [])
+    if all(updated['posed'] < f['posed'] - 0.01 for f in floor):
+        bad.append(f"posed {updated['posed']:.3f} < unchanged {unchanged['posed']:.3f}"
+                   + (f" and rebuilt {rebuilt['posed']:.3f}" if rebuilt is not None else ''))
     for key in ('median_m', 'p95_m'):
-        if not updated[key] <= UPDATE_FACTOR * unchanged[key]:
-            bad.append(f'{key} {100 * updated[key]:.2f} cm > {UPDATE_FACTOR:g} x unchanged '
-                       f'{100 * unchanged[key]:.2f} cm')
+        if updated[key] <= UPDATE_FACTOR * unchanged[key] or \
+                (rebuilt is not None and updated[key] <= REBUILD_FACTOR * rebuilt[key]):
+            continue
+        bad.append(f'{key} {100 * updated[key]:.2f} cm > {UPDATE_FACTOR:g} x unchanged '
+                   f'{100 * unchanged[key]:.2f} cm' +
+                   (f' and > {REBUILD_FACTOR:g} x rebuilt {100 * rebuilt[key]:.2f} cm'
+                    if rebuilt is not None else ''))
     return bad
 
 
