@@ -1,0 +1,62 @@
+"""The motion prior's gate in the tracked pose's refinement (``points_refinement``)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+
+def test_points_that_disagree_with_the_prediction_decide_alone(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """One wall 4 m ahead, 60 degrees wide, 0.3 px noise; a prediction 20 cm too near it.
+
+    Kept (the gate turned off), the prediction pulls the pose 6 cm along the line of
+    sight; dropped, the points alone put it within 4 cm, inside three of its standard
+    deviations. A prediction 1 cm off (within its 2 cm spread) is kept: the gate does
+    not change that pose.
+    """
+    from localizer_samples import project, synthetic_database
+
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.index import DatabaseIndex
+    import landmark_localizer.points_refinement as refinement
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.localize import PoseEstimate
+
+    rng = np.random.default_rng(11)
+    n = 30
+    points = np.column_stack([np.full(n, 6.0), rng.uniform(-0.9, 3.9, n),
+                              rng.uniform(0.6, 2.0, n)])
+    index = DatabaseIndex(synthetic_database(rng, points))
+    truth = np.array([2.0, 1.5, 0.05])
+    uv, ok = project(truth, points)
+    ids = np.flatnonzero(ok)
+    assert len(ids) == n
+    uv = uv[ids] + np.random.default_rng(8).normal(0, 0.3, (n, 2))
+    seed = PoseSolution(PoseEstimate(*(truth + [0.03, -0.02, 0.01]), np.eye(3) * 1e-4, 0.5,
+                                     0.0, 2, True), ids, 2, n, 0.3)
+    config = LocalizerConfig()
+    spread = np.array([0.02, 0.02, math.radians(1.0)])
+
+    def error(found: PoseSolution) -> float:
+        return float(np.hypot(*(found.estimate.pose[:2] - truth[:2])))
+
+    far = (truth + [0.2, 0.0, 0.0], spread)
+    found = refinement.refine_on_points(index, ids, uv, seed, config, motion_prior=far)
+    assert found is not None and found is not seed
+    assert refinement._prior_distance(found.estimate.pose, far) > refinement.PRIOR_GATE
+    assert error(found) < 0.04
+    offset = found.estimate.pose[:2] - truth[:2]
+    assert offset @ np.linalg.solve(found.estimate.covariance[:2, :2], offset) < 11.8
+    near = (truth + [0.01, 0.0, 0.0], spread)
+    kept = refinement.refine_on_points(index, ids, uv, seed, config, motion_prior=near)
+    monkeypatch.setattr(refinement, 'PRIOR_GATE', math.inf)
+    pulled = refinement.refine_on_points(index, ids, uv, seed, config, motion_prior=far)
+    assert error(pulled) > 0.05
+    np.testing.assert_array_equal(
+        refinement.refine_on_points(index, ids, uv, seed, config, motion_prior=near)
+        .estimate.pose, kept.estimate.pose)
+    # A yaw across +-pi is a small offset, not a full turn.
+    assert refinement._prior_distance(np.array([0.0, 0.0, math.pi - 0.01]),
+                                      (np.array([0.0, 0.0, -math.pi + 0.01]), spread)) < 2.0
