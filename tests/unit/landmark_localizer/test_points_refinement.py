@@ -60,3 +60,31 @@ def test_points_that_disagree_with_the_prediction_decide_alone(
     # A yaw across +-pi is a small offset, not a full turn.
     assert refinement._prior_distance(np.array([0.0, 0.0, math.pi - 0.01]),
                                       (np.array([0.0, 0.0, -math.pi + 0.01]), spread)) < 2.0
+
+
+def test_the_motion_prior_widens_with_the_motion_and_the_last_poses_covariance() -> None:
+    """2 cm and 1 degree at rest; a fifth of a 20 cm step; plus the last pose's spread."""
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import motion_prior
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.localize import PoseEstimate
+
+    config = LocalizerConfig()
+    predicted = np.array([1.0, 2.0, 0.5])
+    centre, std = motion_prior(predicted, None, None, config)
+    np.testing.assert_allclose(centre, predicted)
+    np.testing.assert_allclose(std, [0.02, 0.02, math.radians(1.0)])
+    last_pose = predicted - [0.12, 0.16, 0.0]            # 20 cm on: 4 cm
+    _, std = motion_prior(predicted, last_pose, None, config)
+    np.testing.assert_allclose(std[:2], [0.04, 0.04])
+    # A turn across +-pi is a small turn: the heading keeps its configured spread.
+    _, std = motion_prior(np.array([0.0, 0.0, math.pi - 0.01]),
+                          np.array([0.0, 0.0, -math.pi + 0.01]), None, config)
+    assert std[2] == math.radians(1.0)
+    cov = np.diag([0.03 ** 2, 0.03 ** 2, math.radians(2.0) ** 2])
+    last = PoseSolution(PoseEstimate(*last_pose, cov, 0.5, 0.0, 2, True), np.arange(3), 2, 3,
+                        0.3)
+    _, std = motion_prior(predicted, last_pose, last, config)
+    np.testing.assert_allclose(std, [0.05, 0.05, math.radians(math.sqrt(5.0))])
+    assert motion_prior(predicted, None, None,
+                        config.with_values({'motion_prior_m': 0.0})) is None

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 import logging
-import math
 import time
 
 import numpy as np
@@ -42,7 +41,7 @@ from landmark_localizer.frames import Estimate, Frame, Stats, exposed
 from landmark_localizer.health import RegionHealth
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.map_search import MapSearch
-from landmark_localizer.points_refinement import refine_on_points
+from landmark_localizer.points_refinement import motion_prior, refine_on_points
 from landmark_localizer.pose import (
     PoseSolution,
     base_covariance,
@@ -54,7 +53,7 @@ from landmark_localizer.switching import MotionPredictor, TrackedCounts, choose_
 from landmark_localizer.tracking import Tracker, Tracks
 from landmark_localizer.voting import Verified, verify, vote
 from vbn_common.features import SiftConfig, extract_features_scaled
-from vbn_common.geometry.frames import compose_poses, wrap_angle
+from vbn_common.geometry.frames import compose_poses
 
 __all__ = ['Estimate', 'Frame', 'Localizer', 'LOST', 'TRACKING']
 
@@ -335,7 +334,7 @@ class Localizer:
         """Return where the camera is now: the odometry's motion since, else constant velocity.
 
         Without either (the first frame after a vote, with no odometry) the last pose
-        itself, and :meth:`_motion_prior` then holds nothing to it.
+        itself, and :func:`.points_refinement.motion_prior` then holds nothing to it.
         """
         self._moving = True
         if self.camera_pose is None:
@@ -378,7 +377,8 @@ class Localizer:
         if solution is not None and self.config.absolute_min_inliers > 0:
             solution = refine_on_points(
                 self.index, tracks.class_ids, tracks.uv.astype(float), solution, config,
-                motion_prior=self._motion_prior(predicted),
+                motion_prior=None if predicted is None or not self._moving else motion_prior(
+                    predicted, self.camera_pose, self._last_solution, config),
                 scene=self.tracker.scene.measure(image, solution.estimate.pose))
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
@@ -427,25 +427,6 @@ class Localizer:
         self.tracker.tracks = self.tracker.tracks.merged(found)
 
     _probes = 0  # landmark probes so far (round robin over the untracked ones)
-
-    def _motion_prior(self, predicted: np.ndarray | None
-                      ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Return the motion model's prior on the tracked camera pose, or None.
-
-        Its spread is the configured one, or a fifth of the predicted motion where that
-        is larger: at 2 Hz a frame is 20 cm on, and a wheel slipping by 20 % or a turn
-        the constant velocity did not foresee moves the prediction by centimetres.
-        """
-        config = self.config
-        if predicted is None or not self._moving or config.motion_prior_m <= 0 or \
-                config.motion_prior_deg <= 0:
-            return None
-        moved = np.zeros(3) if self.camera_pose is None else \
-            np.abs(np.asarray(predicted[:3], float) - self.camera_pose[:3])
-        moved[2] = abs(float(wrap_angle(moved[2])))   # a turn across +-pi is small
-        std = np.array([max(config.motion_prior_m, 0.2 * math.hypot(moved[0], moved[1]))] * 2
-                       + [max(math.radians(config.motion_prior_deg), 0.2 * moved[2])])
-        return np.asarray(predicted[:3], float), std
 
     def _redetect(self, image: np.ndarray, tracks: Tracks, region, predicted: np.ndarray
                   ) -> Tracks:
