@@ -185,3 +185,9 @@ def test_the_absolute_pose_is_searched_near_the_odometrys_prediction() -> None:
     assert search_prior(bridge, 80 * S, np.array([5.0, 0.0, 0.0]), config) is None
     off = LocalizerConfig(absolute_bridged_min_inliers=0)
     assert search_prior(bridge, S, np.array([0.5, 0.0, 0.0]), off) is None
+    # A camera 30 cm ahead of the base: its pose, and the lever arm times the turn more.
+    mount = np.array([0.3, 0.0, 0.0])
+    camera, wider, same_turn, _ = search_prior(bridge, S, np.array([0.5, 0.0, 0.0]), config,
+                                               mount)
+    np.testing.assert_allclose(camera, [0.8, 0.0, 0.0])
+    assert same_turn == turn and wider == pytest.approx(radius + 0.3 * turn)

@@ -251,14 +251,18 @@ class OdometryBridge:
 
 
 def search_prior(bridge: OdometryBridge, stamp_ns: int, odom: np.ndarray | None,
-                 config: LocalizerConfig) -> tuple[np.ndarray, float, float, int] | None:
+                 config: LocalizerConfig, mount: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, float, float, int] | None:
     """Return where to look for an absolute pose by the odometry, or None.
 
     ``(pose, radius_m, turn_rad, least inliers)``: the bridge's prediction and three of
-    its standard deviations. While the bridge lasts, ``absolute_bridged_min_inliers``
-    suffice so near the prediction (a changed world leaves few of the old points:
-    10 right matches among 200 wrong ones); past its end, while three deviations stay
-    within ``max_jump_m``, ``absolute_min_inliers`` (a 2 Hz camera passing a changed
+    its standard deviations; with the camera's ``mount`` ``(x, y, yaw)`` on the base,
+    the camera's pose, and a radius widened by the mount's lever arm times the turn (a
+    camera 30 cm ahead of the base moves 3 cm as the base turns by 0.1 rad). While the
+    bridge lasts, ``absolute_bridged_min_inliers`` suffice so near the prediction (a
+    changed world leaves few of the old points: 10 right matches among 200 wrong ones);
+    past its end, while three deviations stay within ``max_jump_m``,
+    ``absolute_min_inliers`` (a 2 Hz camera passing a changed
     stretch otherwise finds no pose until a region verifies). None when
     ``absolute_bridged_min_inliers`` is 0, without an anchor, or wider than that.
     """
@@ -272,8 +276,13 @@ def search_prior(bridge: OdometryBridge, stamp_ns: int, odom: np.ndarray | None,
             continue
         pose, cov = predicted
         radius = 3.0 * math.sqrt(max(cov[0, 0], cov[1, 1]))
-        if radius <= config.max_jump_m:
-            return pose, radius, 3.0 * math.sqrt(cov[2, 2]), need
+        if radius > config.max_jump_m:
+            continue
+        turn = 3.0 * math.sqrt(cov[2, 2])
+        if mount is None:
+            return pose, radius, turn, need
+        lever = math.hypot(float(mount[0]), float(mount[1]))
+        return compose_poses(pose, mount), radius + lever * turn, turn, need
     return None
 
 

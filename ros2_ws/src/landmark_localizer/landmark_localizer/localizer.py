@@ -210,9 +210,8 @@ class Localizer:
                 prior = compose_poses(base, self.index.camera_mount)
             elif v is not None:
                 prior = prior + v * (frame.stamp_ns - self.last_pose_stamp) / 1e9
-        searched = search_prior(self.bridge, frame.stamp_ns, frame.odom, self.config)
-        if searched is not None:   # the odometry's prediction: search near it
-            searched = (compose_poses(searched[0], self.index.camera_mount), *searched[1:])
+        searched = search_prior(self.bridge, frame.stamp_ns, frame.odom, self.config,
+                                self.index.camera_mount)   # the odometry's: search near it
         return self.map_search.solve(image, features, nearest, self._scene_matches(features),
                                      self.rng, prior, searched)
 
