@@ -204,6 +204,12 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
                     ) -> tuple[np.ndarray, np.ndarray] | None:
     """Gauss-Newton with Huber weights: ``(state (6,), covariance of (x, y, yaw))``.
 
+    The covariance takes the rays' noise as their RMS angular error at the state found
+    (at least ``sigma``) and the priors as given: scaling the whole information by the
+    residuals would widen the priors too, and a motion prior carried on from the last
+    pose's covariance (:func:`~.points_refinement.motion_prior`) then grew frame after
+    frame wherever the points leave a direction to the prior.
+
     Args:
         pose: (3,) starting camera pose.
         rays: (n, 3) unit rays in the camera's level base frame.
@@ -250,11 +256,17 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
             break
     if info is None:
         return None
+    r, full = _residuals_and_jacobian(state, rays, points)
+    jac = full[:, :, columns].reshape(-1, n_free)
+    norms = np.linalg.norm(r, axis=1)
+    weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
+    noise = max(float(np.sqrt(np.mean(norms ** 2))), sigma) if len(norms) else sigma
+    info = (jac * weights[:, None]).T @ jac * (sigma / noise) ** 2 + prior_info
     try:
-        cov = np.linalg.inv(info)[:3, :3]
+        cov = sigma ** 2 * np.linalg.inv(info)[:3, :3]
     except np.linalg.LinAlgError:
         return None
-    return state, cov
+    return state, 0.5 * (cov + cov.T)
 
 
 def _residuals_and_jacobian(state: np.ndarray, rays: np.ndarray, points: np.ndarray
@@ -389,14 +401,10 @@ def _finish(start: np.ndarray, rays: np.ndarray, points: np.ndarray, threshold: 
                             tilt_prior, height_prior)
     if found is None:
         return None
-    state, cov = found
+    state, covariance = found   # the rays' noise: their RMS error, floored at sigma
     residual = np.linalg.norm(_residuals(state, rays[inliers], points[inliers]), axis=1)
     rms = float(np.sqrt(np.mean(residual ** 2)))
-    # The information is in units of one ray's variance (the priors whitened by sigma):
-    # scaled by the residuals' own variance, floored at sigma.
-    covariance = cov * max(rms, sigma) ** 2
-    return AbsolutePose(state[:3].copy(), 0.5 * (covariance + covariance.T), inliers, rms,
-                        state[3:].copy())
+    return AbsolutePose(state[:3].copy(), covariance, inliers, rms, state[3:].copy())
 
 
 def _sample(rays: np.ndarray, points: np.ndarray, rng: np.random.Generator, iterations: int,

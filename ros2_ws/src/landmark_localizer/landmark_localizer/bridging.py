@@ -264,7 +264,8 @@ def search_prior(bridge: OdometryBridge, stamp_ns: int, odom: np.ndarray | None,
     past its end, while three deviations stay within ``max_jump_m``,
     ``absolute_min_inliers`` (a 2 Hz camera passing a changed
     stretch otherwise finds no pose until a region verifies). None when
-    ``absolute_bridged_min_inliers`` is 0, without an anchor, or wider than that.
+    ``absolute_bridged_min_inliers`` is 0, without an anchor, or when the base's three
+    deviations are wider than ``max_jump_m`` (the lever arm's share is not counted).
     """
     if config.absolute_bridged_min_inliers <= 0:
         return None

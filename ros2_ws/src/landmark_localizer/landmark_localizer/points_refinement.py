@@ -19,7 +19,6 @@ from landmark_localizer.absolute_pose import (
     JUDGE_POINTS,
     _angular_errors,
     _coarse_inliers,
-    _residuals,
     _spread,
     _tilt_rotation,
     base_rays,
@@ -42,9 +41,9 @@ def motion_prior(predicted: np.ndarray, last_pose: np.ndarray | None,
     larger (at 2 Hz a frame is 20 cm on, and a wheel slipping by 20 % or a turn the
     constant velocity did not foresee moves the prediction by centimetres), widened by
     the last pose's own covariance (``last``), which the prediction carries on (a
-    Kalman prediction). Without it, a pose that narrow points and the prior had held
-    16 cm off went on claiming the prior's 2 cm, and only crept back at 2 cm a frame
-    (a changed room).
+    Kalman prediction; None when that covariance is not finite). Without it, a pose that
+    narrow points and the prior had held 16 cm off went on claiming the prior's 2 cm,
+    and only crept back at 2 cm a frame (a changed room).
     """
     if config.motion_prior_m <= 0 or config.motion_prior_deg <= 0:
         return None
@@ -55,8 +54,9 @@ def motion_prior(predicted: np.ndarray, last_pose: np.ndarray | None,
                    + [max(math.radians(config.motion_prior_deg), 0.2 * moved[2])])
     if last is not None:
         var = np.diag(np.asarray(last.estimate.covariance, float))[:3]
-        if np.all(np.isfinite(var)):
-            std = np.sqrt(std ** 2 + np.maximum(var, 0.0))
+        if not np.all(np.isfinite(var)):
+            return None   # the last pose's doubt unknown: no prior rather than a tight one
+        std = np.sqrt(std ** 2 + np.maximum(var, 0.0))
     return np.asarray(predicted[:3], float), std
 
 
@@ -115,7 +115,8 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     is also returned when the polished pose keeps fewer than ``min_inliers``, or when
     they span less than ``absolute_min_spread_deg`` and no ``motion_prior`` holds the
     range they leave free. When the polished pose lies more than :data:`PRIOR_GATE` of
-    the prior's spreads from the prediction, the points are refined again without it.
+    the prior's spreads from the prediction, the points are refined again without it
+    (which returns the seed where they cannot stand alone).
     Thresholds are in :attr:`DatabaseIndex.residual_focal` pixels. ``strict`` (a vote,
     which no prediction checks): None as well when there are too few points to judge
     by. ``scene``: ``(uv, xyz)`` of scene points measured in the frame
@@ -183,11 +184,9 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
         # spread does not cover): they decide alone. Pulled by a prediction 10 cm off,
         # a 2 Hz pose settled 22 cm off claiming 1.8 cm, where the points alone gave
         # 0.3 cm (room, wheels slipping and odometry dropping out).
+        # Alone they may not stand (too narrow or too few once re-selected): the seed.
         alone = refine_on_points(index, class_ids, uv, seed, config, strict, None, scene)
         return alone if alone is not None else seed
-    residual = np.linalg.norm(_residuals(state, all_rays, all_points), axis=1)
-    rms = float(np.sqrt(np.mean(residual ** 2)))
-    cov = cov * max(rms, 0.5 / focal) ** 2
     est = seed.estimate
     estimate = PoseEstimate(float(state[0]), float(state[1]), float(state[2]),
                             0.5 * (cov + cov.T), est.ray_angle, est.residual, est.n_views,

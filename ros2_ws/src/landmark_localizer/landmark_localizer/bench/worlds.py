@@ -105,9 +105,10 @@ def update_failures(updated: dict[str, Any], unchanged: dict[str, Any],
                     rebuilt: dict[str, Any] | None = None) -> list[str]:
     """Return how the ``updated`` run falls short of the ``unchanged`` run's figures.
 
-    A figure passes when it is within :data:`UPDATE_FACTOR` of the ``unchanged`` run's
-    or within :data:`REBUILD_FACTOR` of the ``rebuilt`` run's (the same changed run
-    against a database built afresh from the update's exploration), when given.
+    The median and p95 pass when within :data:`UPDATE_FACTOR` of the ``unchanged``
+    run's or within :data:`REBUILD_FACTOR` of the ``rebuilt`` run's (the same changed
+    run against a database built afresh from the update's exploration), when given; the
+    share posed when at most 1 % below either.
     """
     bad = []
     floor = [unchanged] + ([rebuilt] if rebuilt is not None else [])
