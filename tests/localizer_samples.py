@@ -38,6 +38,27 @@ def wall_points(rng: np.random.Generator, n: int = 60) -> np.ndarray:
     return np.stack([x, y, rng.uniform(0.4, 2.2, n)], axis=1)
 
 
+#: The camera of :func:`wall_ahead`, 4 m before the wall x = 6, facing it.
+AHEAD = np.array([2.0, 1.5, 0.05])
+
+
+def wall_ahead(n: int, low: float, high: float):  # noqa: ANN201 - (points, index, uv, ids)
+    """Points on the wall x = 6 between y = ``low`` and ``high`` (z 0.6 to 2.0 m).
+
+    Returns ``(points, DatabaseIndex, uv, ids)``: the pixels at which :data:`AHEAD`
+    sees them, without noise, and the points it sees (seeded: the same every call).
+    """
+    from landmark_localizer.index import DatabaseIndex
+
+    rng = np.random.default_rng(11)
+    points = np.column_stack([np.full(n, 6.0), rng.uniform(low, high, n),
+                              rng.uniform(0.6, 2.0, n)])
+    index = DatabaseIndex(synthetic_database(rng, points))
+    uv, ok = project(AHEAD, points)
+    ids = np.flatnonzero(ok)
+    return points, index, uv[ids], ids
+
+
 def project(pose: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Pixels of points seen by the camera at planar pose (x, y, yaw)."""
     optical = world_points_to_camera(np.asarray(pose, float), HEIGHT, points)

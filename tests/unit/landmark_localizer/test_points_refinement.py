@@ -16,24 +16,18 @@ def test_points_that_disagree_with_the_prediction_decide_alone(
     deviations. A prediction 1 cm off (within its 2 cm spread) is kept: the gate does
     not change that pose.
     """
-    from localizer_samples import project, synthetic_database
+    from localizer_samples import AHEAD, wall_ahead
 
     from landmark_localizer.config import LocalizerConfig
-    from landmark_localizer.index import DatabaseIndex
     import landmark_localizer.points_refinement as refinement
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.localize import PoseEstimate
 
-    rng = np.random.default_rng(11)
     n = 30
-    points = np.column_stack([np.full(n, 6.0), rng.uniform(-0.9, 3.9, n),
-                              rng.uniform(0.6, 2.0, n)])
-    index = DatabaseIndex(synthetic_database(rng, points))
-    truth = np.array([2.0, 1.5, 0.05])
-    uv, ok = project(truth, points)
-    ids = np.flatnonzero(ok)
+    _, index, uv, ids = wall_ahead(n, -0.9, 3.9)
+    truth = AHEAD
     assert len(ids) == n
-    uv = uv[ids] + np.random.default_rng(8).normal(0, 0.3, (n, 2))
+    uv = uv + np.random.default_rng(8).normal(0, 0.3, (n, 2))
     seed = PoseSolution(PoseEstimate(*(truth + [0.03, -0.02, 0.01]), np.eye(3) * 1e-4, 0.5,
                                      0.0, 2, True), ids, 2, n, 0.3)
     config = LocalizerConfig()
@@ -98,27 +92,20 @@ def test_a_prior_carried_from_pose_to_pose_stays_bounded() -> None:
     growing frame after frame (it reached 54 cm in 8 frames when the whole information
     was scaled).
     """
-    from localizer_samples import project, synthetic_database
+    from localizer_samples import AHEAD, wall_ahead
 
     from landmark_localizer.config import LocalizerConfig
-    from landmark_localizer.index import DatabaseIndex
     from landmark_localizer.points_refinement import motion_prior, refine_on_points
     from landmark_localizer.pose import PoseSolution
     from vbn_common.geometry.localize import PoseEstimate
 
-    rng = np.random.default_rng(11)
-    n = 30
-    points = np.column_stack([np.full(n, 6.0), rng.uniform(0.7, 2.3, n),
-                              rng.uniform(0.6, 2.0, n)])
-    index = DatabaseIndex(synthetic_database(rng, points))
-    truth = np.array([2.0, 1.5, 0.05])
-    uv, ok = project(truth, points)
-    ids = np.flatnonzero(ok)
+    _, index, uv, ids = wall_ahead(30, 0.7, 2.3)
+    truth = AHEAD
     config = LocalizerConfig()
     last = None
     spreads = []
     for frame in range(12):
-        noisy = uv[ids] + np.random.default_rng(frame).normal(0, 1.0, (len(ids), 2))
+        noisy = uv + np.random.default_rng(frame).normal(0, 1.0, (len(ids), 2))
         seed = PoseSolution(PoseEstimate(*(truth + [0.03, -0.02, 0.01]), np.eye(3) * 1e-4,
                                          0.5, 0.0, 2, True), ids, 2, len(ids), 0.3)
         prior = motion_prior(truth, truth, last, config)
