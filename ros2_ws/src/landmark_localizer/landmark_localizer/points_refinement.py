@@ -27,6 +27,7 @@ from landmark_localizer.absolute_pose import (
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.pose import PoseSolution
+from vbn_common.geometry.frames import wrap_angle
 from vbn_common.geometry.localize import PoseEstimate
 
 __all__ = ['motion_prior', 'point_errors', 'refine_on_points']
@@ -49,7 +50,7 @@ def motion_prior(predicted: np.ndarray, last_pose: np.ndarray | None,
         return None
     moved = np.zeros(3) if last_pose is None else \
         np.abs(np.asarray(predicted[:3], float) - np.asarray(last_pose[:3], float))
-    moved[2] = abs(math.remainder(moved[2], 2.0 * math.pi))  # a turn across +-pi is small
+    moved[2] = abs(float(wrap_angle(moved[2])))   # a turn across +-pi is small
     std = np.array([max(config.motion_prior_m, 0.2 * math.hypot(moved[0], moved[1]))] * 2
                    + [max(math.radians(config.motion_prior_deg), 0.2 * moved[2])])
     if last is not None:
@@ -85,7 +86,7 @@ def _prior_distance(state: np.ndarray, motion_prior: tuple[np.ndarray, np.ndarra
     """Mahalanobis distance of ``state``'s ``(x, y, yaw)`` from the motion prior."""
     centre, std = (np.asarray(a, float) for a in motion_prior)
     offset = np.asarray(state[:3], float) - centre
-    offset[2] = math.remainder(offset[2], 2.0 * math.pi)
+    offset[2] = float(wrap_angle(offset[2]))
     return float(np.linalg.norm(offset / np.maximum(std, 1e-12)))
 
 

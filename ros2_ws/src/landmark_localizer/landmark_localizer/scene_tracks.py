@@ -52,7 +52,7 @@ from landmark_localizer.points_refinement import point_errors
 from vbn_common.geometry.camera import pixels_per_radian
 from vbn_common.patch_alignment import tile_mosaic
 
-__all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SEEN_MARGIN_M', 'SceneTracks', 'scene_tracks_unavailable']
+__all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SceneTracks', 'scene_tracks_unavailable']
 
 #: Grid of image cells that births fill evenly (columns, rows).
 CELLS = (16, 4)

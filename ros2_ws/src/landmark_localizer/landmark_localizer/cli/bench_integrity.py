@@ -83,9 +83,14 @@ def _scene_arg(scene: str, seed: int, out: Path) -> str:
     return str(path)
 
 
+def _key(scene: str, seed: int) -> str:
+    """Return the name of a scene's files: the hall is drawn per seed, the others shipped."""
+    return f'hall{seed}' if scene == 'hall' else scene
+
+
 def _database(scene: str, seed: int, out: Path, log: Path) -> Path:
     """Return the scene's database, rendering its exploration and building it if missing."""
-    key = f'hall{seed}' if scene == 'hall' else scene
+    key = _key(scene, seed)
     db = out / f'{key}.db'
     if db.exists():
         return db
@@ -104,7 +109,7 @@ def _reexplored(scene: str, seed: int, out: Path, log: Path) -> Path:
     """Return the changed world's exploration bag (rendered if missing)."""
     from landmark_localizer.bench.worlds import reexplore_argv
 
-    key = f'hall{seed}' if scene == 'hall' else scene
+    key = _key(scene, seed)
     bag = out / 'bags' / f'{key}_reexplored_s{seed}'
     if not bag.exists():
         bag.parent.mkdir(parents=True, exist_ok=True)
@@ -115,7 +120,7 @@ def _reexplored(scene: str, seed: int, out: Path, log: Path) -> Path:
 
 def _updated_database(scene: str, seed: int, db: Path, out: Path, log: Path) -> Path:
     """Return ``db`` updated with an exploration of the changed world."""
-    key = f'hall{seed}' if scene == 'hall' else scene
+    key = _key(scene, seed)
     updated = out / f'{key}_updated_s{seed}.db'
     if not updated.exists():
         _vbn(['db-update', str(db), str(_reexplored(scene, seed, out, log)), '--out',
@@ -125,7 +130,7 @@ def _updated_database(scene: str, seed: int, db: Path, out: Path, log: Path) -> 
 
 def _rebuilt_database(scene: str, seed: int, out: Path, log: Path) -> Path:
     """Return a database built afresh from the changed world's exploration alone."""
-    key = f'hall{seed}' if scene == 'hall' else scene
+    key = _key(scene, seed)
     rebuilt = out / f'{key}_rebuilt_s{seed}.db'
     if not rebuilt.exists():
         _vbn(['build', str(_reexplored(scene, seed, out, log)), '--db', str(rebuilt),
