@@ -112,15 +112,16 @@ def test_update_with_bad_input_leaves_the_database_as_it_was(room_db: Path, tmp_
 
 def test_a_region_left_without_model_view_is_refused(room_db: Path, part_bag: Path,
                                                      monkeypatch) -> None:
-    from visibility_builder import db_update
+    from visibility_builder import db_update, update_regions
 
     def no_view(*args, **kwargs):
         raise VisibilityBuilderError('no image shows it')
 
     database = open_database(room_db)
     # Drop one region's landmark class everywhere the update looks: that region is
-    # rebuilt, and with no model view the update must refuse.
-    monkeypatch.setattr(db_update, 'select_model_views', no_view)
+    # rebuilt, and with no model view (however often it is drawn again) the update must
+    # refuse.
+    monkeypatch.setattr(update_regions, 'select_model_views', no_view)
     monkeypatch.setattr(db_update, 'label_features',
                         lambda features, *a, **k: np.full(len(features), -1, np.int64))
     with pytest.raises(VisibilityBuilderError, match='without a model view'):

@@ -54,7 +54,7 @@ def test_db_info_text(db_file, capsys):
     path, db = db_file
     assert vbn('db-info', path) == 0
     out = capsys.readouterr().out
-    assert out.startswith(f'{path}: landmark database, schema version 4, ')
+    assert out.startswith(f'{path}: landmark database, schema version 5, ')
     assert f'scene points: {db.points.n_points} (3-D points' in out
     assert f'regions:     {db.n_regions} (mean' in out
     assert f'features:    {db.n_classes} classes' in out
@@ -115,4 +115,4 @@ def test_installed_vbn_runs_db_info(db_file):
     if 'invalid choice' in done.stderr:
         pytest.skip('the workspace install predates db-info (run make setup)')
     assert done.returncode == 0, done.stderr
-    assert 'landmark database, schema version 4' in done.stdout
+    assert 'landmark database, schema version 5' in done.stdout

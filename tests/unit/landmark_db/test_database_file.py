@@ -24,6 +24,7 @@ from landmark_db.database import (
     store,
     write_database,
 )
+from landmark_db.database.compact import compact_database
 from landmark_db.errors import LandmarkDbError
 
 TESTS = Path(__file__).resolve().parents[2]
@@ -33,6 +34,16 @@ TESTS = Path(__file__).resolve().parents[2]
 def db_file(tmp_path):
     path = tmp_path / 'room.db'
     write_database(path, sample_database(np.random.default_rng(0)))
+    return path
+
+
+@pytest.fixture
+def coded_file(tmp_path):
+    """The sample with 16-byte descriptor codes and JPEG patches."""
+    path = tmp_path / 'coded.db'
+    db, _ = compact_database(sample_database(np.random.default_rng(0)), 16, 80,
+                             np.random.default_rng(0))
+    write_database(path, db)
     return path
 
 
@@ -53,10 +64,12 @@ def test_header_identifies_the_file(db_file):
     assert connection.execute('PRAGMA user_version').fetchone()[0] == SCHEMA_VERSION
     meta = dict(connection.execute('SELECT key, value FROM meta'))
     assert meta['schema_version'] == str(SCHEMA_VERSION)
-    # The membership index answers "which regions does class c vote for" in SQL.
-    plan = ' '.join(str(row) for row in connection.execute(
-        'EXPLAIN QUERY PLAN SELECT region FROM region_features WHERE class_id = 3'))
-    assert 'region_features_by_class' in plan
+    # Schema 5 keeps a region's members in its row: 9 poses and 12 classes fit uint16.
+    poses, landmark = connection.execute('SELECT poses, landmark FROM regions WHERE id = 0'
+                                         ).fetchone()
+    region = sample_database(np.random.default_rng(0)).regions[0]
+    assert np.frombuffer(poses, '<u2').tolist() == region.poses.tolist()
+    assert np.frombuffer(landmark, '<u2').tolist() == region.landmark.tolist()
     connection.close()
 
 
@@ -111,32 +124,107 @@ def test_missing_table(db_file, tmp_path):
 
 @pytest.mark.parametrize('statement, message', [
     ('DELETE FROM region_adjacency', 'region graph does not match'),
-    ('DELETE FROM class_descriptors WHERE class_id = 0', 'descriptor counts'),
+    ("UPDATE classes SET descriptors = x'00' WHERE id = 0", 'descriptor counts'),
     ("UPDATE build_parameters SET value = '0' WHERE key = 'k'", 'k must be'),
-    ('UPDATE region_poses SET pose = 99 WHERE pose = 0', 'out of range'),
+    ("UPDATE regions SET poses = x'6300', n_poses = 1 WHERE id = 0", 'out of range'),
+    ("UPDATE regions SET landmark = x'00' WHERE id = 0", 'members differ'),
     ("UPDATE model_view_features SET keypoints = x'00'", 'do not hold'),
-    ("UPDATE visibility SET class_ids = x'000000' WHERE pose = 0", 'int32'),
-    ("UPDATE visibility SET class_ids = x'ff000000' WHERE pose = 0", 'class out of range'),
+    ("UPDATE visibility SET class_ids = x'000000' WHERE pose = 0", 'uint16 ids'),
+    ("UPDATE visibility SET class_ids = x'ff00' WHERE pose = 0", 'class out of range'),
     ('DELETE FROM visibility WHERE pose = 4', 'poses 0..8'),
     # Values SQLite cannot judge: one descriptor byte, one coordinate.
-    ('UPDATE class_descriptors SET descriptor = zeroblob(128) WHERE class_id = 1',
+    ('UPDATE classes SET descriptors = zeroblob(length(descriptors)) WHERE id = 1',
      'checksum'),
     ('UPDATE poses SET x = x + 1e-9 WHERE id = 3', 'checksum'),
-    # Scene points (schema 2).
-    ('UPDATE scene_points SET x = x + 1e-9 WHERE id = 2', 'checksum'),
-    ("UPDATE scene_points SET descriptor = x'00' WHERE id = 0", 'descriptor is not 128'),
-    ('UPDATE scene_points SET class_id = 99 WHERE id = 0', 'out of range'),
-    ('UPDATE scene_points SET views = 1 WHERE id = 0', 'fewer than 2 views'),
-    # Their patches (schema 4).
-    ("UPDATE scene_points SET patch = x'00' WHERE id = 0", 'not all one odd square size'),
-    ('UPDATE scene_points SET patch_axes = NULL WHERE id = 0', 'a patch needs its axes'),
-    ('UPDATE scene_points SET patch = patch_axes, patch_axes = patch WHERE id = 1',
-     'not all one odd square size'),
+    # Scene points (schema 5: one row a column).
+    ("UPDATE scene_point_columns SET data = zeroblob(length(data)) WHERE name = 'xyz'",
+     'checksum'),
+    ("UPDATE scene_point_columns SET data = x'00' WHERE name = 'descriptors'",
+     'not whole 128-byte descriptors'),
+    ("UPDATE scene_point_columns SET dtype = '<f4' WHERE name = 'class_ids'",
+     "column 'class_ids' is not"),
+    ("UPDATE scene_point_columns SET data = zeroblob(12) WHERE name = 'views'",
+     'fewer than 2 views'),
+    ("UPDATE scene_point_columns SET shape = '[12, 4]' WHERE name = 'xyz'", 'unknown'),
+    ("UPDATE scene_point_columns SET name = 'xyz2' WHERE name = 'xyz'", 'unknown'),
+    ("DELETE FROM scene_point_columns WHERE name = 'descriptors'", 'lack'),
+    # Their patches.
+    ("DELETE FROM scene_point_columns WHERE name = 'patch_axes'", 'axes disagree'),
+    ("UPDATE scene_point_columns SET data = x'00' WHERE name = 'patches'",
+     "column 'patches' is not"),
+    ("UPDATE scene_point_columns SET data = zeroblob(length(data)) WHERE name = 'patches'",
+     'checksum'),
 ])
 def test_inconsistent_contents(db_file, tmp_path, statement, message):
     path = edited_copy(db_file, tmp_path / 'edited.db', statement)
     text = refused_open_only(path)
     assert 'damaged database' in text and message in text
+
+
+@pytest.mark.parametrize('statement, message', [
+    ('UPDATE descriptor_codebook SET centroids = zeroblob(length(centroids))', 'checksum'),
+    ('UPDATE descriptor_codebook SET code_size = 7', 'not one row'),
+    ('DELETE FROM descriptor_codebook', 'descriptor counts'),
+    ("UPDATE model_view_features SET descriptors = x'00'", 'do not hold'),
+    ("UPDATE scene_point_columns SET data = substr(data, 1, 40) WHERE name = 'patches'",
+     'patch code'),
+    ("UPDATE scene_point_columns SET data = zeroblob(length(data)) WHERE name = 'patches'",
+     'the patch code holds 0 patches, not 11'),
+])
+def test_inconsistent_compact_contents(coded_file, tmp_path, statement, message):
+    path = edited_copy(coded_file, tmp_path / 'edited.db', statement)
+    text = refused_open_only(path)
+    assert 'damaged database' in text and message in text
+
+
+SCHEMA_4 = TESTS / 'data' / 'schema4_sample.db'
+"""``sample_database(np.random.default_rng(0))`` written by schema 4's writer (3f0bdbe)."""
+
+
+@pytest.mark.parametrize('statement, message', [
+    ('DELETE FROM class_descriptors WHERE class_id = 0', 'descriptor counts'),
+    ('UPDATE region_poses SET pose = 99 WHERE pose = 0', 'out of range'),
+    ("UPDATE visibility SET class_ids = x'000000' WHERE pose = 0", 'int32'),
+    ('UPDATE class_descriptors SET descriptor = zeroblob(128) WHERE class_id = 1',
+     'checksum'),
+    ('UPDATE scene_points SET x = x + 1e-9 WHERE id = 2', 'checksum'),
+    ("UPDATE scene_points SET descriptor = x'00' WHERE id = 0", 'descriptor is not 128'),
+    ('UPDATE scene_points SET class_id = 99 WHERE id = 0', 'out of range'),
+    ('UPDATE scene_points SET views = 1 WHERE id = 0', 'fewer than 2 views'),
+    ("UPDATE scene_points SET patch = x'00' WHERE id = 0", 'not all one odd square size'),
+    ('UPDATE scene_points SET patch_axes = NULL WHERE id = 0', 'a patch needs its axes'),
+    ('UPDATE scene_points SET patch = patch_axes, patch_axes = patch WHERE id = 1',
+     'not all one odd square size'),
+])
+def test_inconsistent_schema_4_contents(tmp_path, statement, message):
+    path = edited_copy(SCHEMA_4, tmp_path / 'edited.db', statement)
+    text = refused_open_only(path)
+    assert 'damaged database' in text and message in text
+
+
+def schema_4_sample():
+    """The fixture's database: the sample, with the build info the file holds.
+
+    (The info holds the decomposition's measured time, which differs run to run.)
+    """
+    from dataclasses import replace
+
+    return replace(sample_database(np.random.default_rng(0)),
+                   info=open_database(SCHEMA_4).info)
+
+
+def older_file(path: Path, plain, version: int, *statements: str) -> Path:
+    """The schema 4 fixture cut down by ``statements`` to an older version holding ``plain``."""
+    return edited_copy(SCHEMA_4, path, *statements, f'PRAGMA user_version = {version}',
+                       f"UPDATE meta SET value = '{version}' WHERE key = 'schema_version'",
+                       f"UPDATE meta SET value = '{plain.content_digest()}' "
+                       f"WHERE key = 'content_digest'")
+
+
+def test_a_schema_4_file_opens_as_written():
+    opened = open_database(SCHEMA_4)
+    assert opened == schema_4_sample() and opened.codebook is None
+    assert database_summary(SCHEMA_4).counts['descriptor_bytes'] == 128
 
 
 def refused_open_only(path) -> str:
@@ -195,7 +283,7 @@ def test_failed_write_keeps_previous(db_file, monkeypatch):
     def explode(connection, db):
         raise sqlite3.OperationalError('disk I/O error')
 
-    monkeypatch.setattr(store, '_insert_regions', explode)
+    monkeypatch.setattr(store, 'insert_regions', explode)
     with pytest.raises(LandmarkDbError, match='disk I/O error'):
         write_database(db_file, sample_database(np.random.default_rng(1)))
     assert db_file.read_bytes() == before
@@ -213,14 +301,14 @@ _WRITER = textwrap.dedent("""
     db = large_database(np.random.default_rng(7))
     if mode == 'pause':
         # Stop inside the transaction, after the poses and classes are written.
-        real = store._insert_regions
+        real = store.insert_regions
 
         def paused(connection, db):
             real(connection, db)
             marker.write_text('in transaction')
             time.sleep(60)
 
-        store._insert_regions = paused
+        store.insert_regions = paused
     else:
         marker.write_text('writing')
     store.write_database(target, db)
@@ -373,20 +461,15 @@ def test_scene_points_round_trip_and_are_counted(db_file):
 def test_a_schema_2_file_opens_with_where_points_were_seen_unknown(tmp_path):
     from dataclasses import replace
 
-    from database_samples import sample_database
 
-    sample = sample_database(np.random.default_rng(0))
+    sample = schema_4_sample()
     assert sample.points.has_seen_from
-    points = replace(sample.points, seen_from=None)
+    points = replace(sample.points, seen_from=None, patches=None, patch_axes=None)
     plain = replace(sample, points=points)
     assert not points.has_seen_from and np.isnan(points.seen_from).all()
-    source = tmp_path / 'new.db'
-    write_database(source, plain)
-    old = edited_copy(source, tmp_path / 'old.db',
-                      *(f'ALTER TABLE scene_points DROP COLUMN {c}'
-                        for c in ('seen_x', 'seen_y', 'seen_radius')),
-                      'PRAGMA user_version = 2',
-                      "UPDATE meta SET value = '2' WHERE key = 'schema_version'")
+    old = older_file(tmp_path / 'old.db', plain, 2,
+                     *(f'ALTER TABLE scene_points DROP COLUMN {c}'
+                       for c in ('seen_x', 'seen_y', 'seen_radius', 'patch', 'patch_axes')))
     opened = open_database(old)
     assert opened == plain and not opened.points.has_seen_from
     # Known for some points and not others: refused.
@@ -399,46 +482,38 @@ def test_a_schema_2_file_opens_with_where_points_were_seen_unknown(tmp_path):
 def test_a_schema_1_file_opens_with_no_scene_points(tmp_path):
     from dataclasses import replace
 
-    from database_samples import sample_database
-
     from landmark_db.database import ScenePoints
 
-    source = tmp_path / 'new.db'
-    plain = replace(sample_database(np.random.default_rng(0)), points=ScenePoints.empty())
-    write_database(source, plain)
-    old = edited_copy(source, tmp_path / 'old.db', 'DROP TABLE scene_points',
-                      'PRAGMA user_version = 1',
-                      "UPDATE meta SET value = '1' WHERE key = 'schema_version'")
+    plain = replace(schema_4_sample(), points=ScenePoints.empty())
+    old = older_file(tmp_path / 'old.db', plain, 1, 'DROP TABLE scene_points')
     opened = open_database(old)
     assert opened.points.n_points == 0 and opened == plain
     assert 'scene_points' not in database_summary(old).counts
-    # A schema 2 file without the table is damaged.
-    lost = edited_copy(source, tmp_path / 'lost.db', 'DROP TABLE scene_points')
+    # A schema 4 file without the table is damaged, and a schema 5 file without its own.
+    lost = edited_copy(SCHEMA_4, tmp_path / 'lost.db', 'DROP TABLE scene_points')
     assert "table 'scene_points' is missing" in refused(lost)
+    source = tmp_path / 'new.db'
+    write_database(source, plain)
+    lost = edited_copy(source, tmp_path / 'lost5.db', 'DROP TABLE scene_point_columns')
+    assert "table 'scene_point_columns' is missing" in refused(lost)
 
 
 def test_a_schema_3_file_opens_with_no_patches_and_patches_are_checked(tmp_path):
     from dataclasses import replace
 
-    from database_samples import sample_database
 
-    sample = sample_database(np.random.default_rng(0))
+    sample = schema_4_sample()
     assert sample.points.has_patches
     assert sample.points.patch_mask.tolist() == [True] * 11 + [False]
     plain = replace(sample, points=replace(sample.points, patches=None, patch_axes=None))
     assert not plain.points.has_patches
-    source = tmp_path / 'new.db'
-    write_database(source, plain)
-    old = edited_copy(source, tmp_path / 'old.db',
-                      *(f'ALTER TABLE scene_points DROP COLUMN {c}'
-                        for c in ('patch', 'patch_axes')),
-                      'PRAGMA user_version = 3',
-                      "UPDATE meta SET value = '3' WHERE key = 'schema_version'")
+    old = older_file(tmp_path / 'old.db', plain, 3,
+                     *(f'ALTER TABLE scene_points DROP COLUMN {c}'
+                       for c in ('patch', 'patch_axes')))
     opened = open_database(old)
     assert opened == plain and not opened.points.has_patches
     # A changed patch byte is caught by the checksum.
-    write_database(tmp_path / 'with.db', sample)
-    changed = edited_copy(tmp_path / 'with.db', tmp_path / 'changed.db',
+    changed = edited_copy(SCHEMA_4, tmp_path / 'changed.db',
                           'UPDATE scene_points SET patch = zeroblob(49) WHERE id = 3')
     assert 'checksum' in refused_open_only(changed)
     # Patches without axes, an even side, a partly known axis: refused on construction.

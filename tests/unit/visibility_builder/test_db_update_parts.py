@@ -6,6 +6,7 @@ import sys
 
 import cv2
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 from landmark_db.database import FeatureClasses, ScenePoints
@@ -18,6 +19,7 @@ from visibility_builder.db_update import (
     label_features,
     replace_visibility,
 )
+from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.update_classes import NewClasses, merge_classes, merge_points
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
@@ -133,3 +135,37 @@ def test_the_update_looks_at_the_points_its_images_show_from_where_they_were_see
     unknown = ScenePoints(xyz, np.full(3, -1), np.zeros((3, 128), np.uint8), np.full(3, 2))
     assert looked_at(unknown, origin, camera).tolist() == [False, False, False]
     assert looked_at(points, np.zeros((0, 3)), camera).tolist() == [False] * 3
+
+
+def test_a_region_no_image_shows_is_drawn_again_with_what_the_images_show() -> None:
+    from dataclasses import replace
+
+    from visibility_builder.build_config import BuildConfig, DecompositionConfig
+    from visibility_builder.model_views import ImageTable
+    from visibility_builder.update_regions import new_regions
+
+    db = sample_database(np.random.default_rng(0))            # 3 x 3 poses, 12 classes
+    n, m = db.n_poses, db.n_classes
+    # Every pose sees classes 0, 1 and 2 (0 first when the greedy steps tie), but the
+    # only images there (poses 0 and 8) show 1 and 2: a region whose landmark holds 0
+    # can have no model view.
+    visibility = np.zeros((n, m), bool)
+    visibility[:, :3] = True
+    visibility = sp.csr_matrix(visibility)
+    labels = [np.array([1, 2]), np.array([1, 2])]
+    table = ImageTable(pose=np.array([0, 8]), stamp_ns=np.array([1, 2]),
+                       camera_xy=db.poses.xy[[0, 8]], camera_yaw=np.zeros(2),
+                       features=[_features(np.array([[10.0, 10.0], [20.0, 20.0]]),
+                                           np.zeros((2, 128))) for _ in range(2)],
+                       labels=labels)
+    config = replace(BuildConfig(), decomposition=DecompositionConfig(
+        algorithm='B2', k=2, rho=0, sigma=0))
+    regions = new_regions(db, visibility, np.zeros(0, np.int64), np.arange(n), config,
+                          table)
+    assert len(regions) == 1 and sorted(regions[0].landmark.tolist()) == [1, 2]
+    assert regions[0].poses.tolist() == list(range(n))
+    assert [v.pose for v in regions[0].model_views] == [0, 8]
+    # Images that show only one class each: no landmark of 2 has a view.
+    table = replace(table, labels=[np.array([1, -1]), np.array([2, -1])])
+    with pytest.raises(VisibilityBuilderError, match='without a model view'):
+        new_regions(db, visibility, np.zeros(0, np.int64), np.arange(n), config, table)

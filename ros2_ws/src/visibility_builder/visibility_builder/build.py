@@ -14,6 +14,7 @@ filter               retain good features (6.2.2, 8.3.2)          :mod:`.filters
 points               scene points of the verified classes         :mod:`.scene_points`
 decompose            rho-MORDP regions (Chapter 5)                :mod:`landmark_db.decomposition`
 model views          two or three views, extra features (7.2)     :mod:`.model_views`
+compact              descriptor codes, JPEG patches (schema 5)    :mod:`landmark_db...compact`
 database             one SQLite file, atomic                      :mod:`landmark_db.database`
 ==================== ============================================ ==========================
 
@@ -25,7 +26,7 @@ keeps the two equal).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 import logging
 import os
 from pathlib import Path
@@ -46,165 +47,41 @@ from landmark_db.database import (
     write_database,
 )
 from landmark_db.database.build_info import utc_now_iso
-from landmark_db.decomposition import ALGORITHMS, Decomposition, decompose, service
+from landmark_db.database.compact import compact_database
+from landmark_db.decomposition import Decomposition, decompose, service
 from landmark_db.errors import LandmarkDbError
-from landmark_db.workers import available_cores
 from landmark_db.world import WorldInstance
 from vbn_common.errors import VbnCommonError
-from vbn_common.exploration import Exploration, ReadConfig, read_exploration
-from vbn_common.features import ImageFeatures, SiftConfig, extract_many
+from vbn_common.exploration import Exploration, read_exploration
+from vbn_common.features import ImageFeatures, extract_many
 from vbn_common.geometry.camera import camera_from_info
 from vbn_common.geometry.frames import compose_poses, invert_pose
-from vbn_common.parameters import attribute_docs
-from visibility_builder.classes import ClassConfig, correspondence_classes
+from visibility_builder.build_config import (
+    BuildConfig,
+    DecompositionConfig,
+    config_from_flat,
+    flat_config,
+    setting_descriptions,
+)
+from visibility_builder.classes import correspondence_classes
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.filters import FilterConfig, retain_good_features
+from visibility_builder.filters import retain_good_features
 from visibility_builder.model_views import (
     ImageTable,
-    ModelViewConfig,
     class_descriptors,
     extra_features,
     select_model_views,
 )
 from visibility_builder.point_patches import patch_sources
-from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
-from visibility_builder.scene_points import PointsConfig, labels_by_image, scene_points
-from visibility_builder.verification import VerifyConfig, verify_classes
+from visibility_builder.sampled_poses import PoseSampling, sample_poses
+from visibility_builder.scene_points import labels_by_image, scene_points
+from visibility_builder.verification import verify_classes
 
 __all__ = ['BuildConfig', 'BuildReport', 'BuildResult', 'DecompositionConfig', 'build',
            'build_from_exploration', 'config_from_flat', 'flat_config',
            'setting_descriptions']
 
 _LOG = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class DecompositionConfig:
-    """The decomposition step (Chapter 5).
-
-    Attributes:
-        algorithm: One of ``landmark_db.decomposition.ALGORITHMS``.
-        k: Features per landmark.
-        rho: Overlap radius in pose-graph steps.
-        sigma: A region must cover more than ``sigma`` otherwise uncovered poses.
-        seed: Tie-breaking seed.
-    """
-
-    algorithm: str = 'best'
-    k: int = 8
-    rho: int = 1
-    sigma: int = 0
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.algorithm not in ALGORITHMS:
-            raise VisibilityBuilderError(f'unknown algorithm {self.algorithm!r}; choose one '
-                                         f'of {", ".join(ALGORITHMS)}')
-        for name, least in (('k', 1), ('rho', 0), ('sigma', 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
-                    or value < least:
-                raise VisibilityBuilderError(f'{name} must be an integer >= {least}, '
-                                             f'got {value!r}')
-
-
-@dataclass(frozen=True)
-class BuildConfig:
-    """Everything ``build`` needs, one frozen config per step.
-
-    Attributes:
-        read: Topics, pose source and tolerances.
-        sampling: Grouping frames into poses, graph connectivity.
-        sift: SIFT settings (stored in the database for the localizer).
-        classes: Algorithm 6.3 (tau, gamma, ratio).
-        verify: Geometric verification of the classes.
-        filters: Section 6.2.2 filters.
-        decomposition: Algorithm, k, rho, sigma.
-        model_views: Views and extra features per region.
-        points: The scene points kept beside the regions.
-        descriptors_per_class: Representative descriptors kept per class.
-        workers: Processes for SIFT and matching (None: every core).
-    """
-
-    read: ReadConfig = field(default_factory=ReadConfig)
-    sampling: SamplingConfig = field(default_factory=SamplingConfig)
-    sift: SiftConfig = field(default_factory=SiftConfig)
-    classes: ClassConfig = field(default_factory=ClassConfig)
-    verify: VerifyConfig = field(default_factory=VerifyConfig)
-    filters: FilterConfig = field(default_factory=FilterConfig)
-    decomposition: DecompositionConfig = field(default_factory=DecompositionConfig)
-    model_views: ModelViewConfig = field(default_factory=ModelViewConfig)
-    points: PointsConfig = field(default_factory=PointsConfig)
-    descriptors_per_class: int = 4
-    workers: int | None = None
-
-    def __post_init__(self) -> None:
-        if self.descriptors_per_class < 1:
-            raise VisibilityBuilderError(
-                f'descriptors_per_class must be >= 1, got {self.descriptors_per_class}')
-        if self.workers is not None and self.workers < 1:
-            raise VisibilityBuilderError(f'workers must be >= 1, got {self.workers}')
-
-    @property
-    def n_workers(self) -> int:
-        """Processes to use."""
-        return self.workers or available_cores()
-
-
-_SECTIONS = ('read', 'sampling', 'sift', 'classes', 'verify', 'filters', 'decomposition',
-             'model_views', 'points')
-
-
-def flat_config(config: BuildConfig) -> dict[str, Any]:
-    """``{'section.name': value}`` of every setting (ROS parameter names, the database)."""
-    out: dict[str, Any] = {}
-    for section in _SECTIONS:
-        for key, value in asdict(getattr(config, section)).items():
-            out[f'{section}.{key}'] = value
-    out['descriptors_per_class'] = config.descriptors_per_class
-    out['workers'] = config.workers
-    return out
-
-
-def config_from_flat(values: dict[str, Any], base: BuildConfig | None = None) -> BuildConfig:
-    """Return ``base`` (default: the defaults) with ``{'section.name': value}`` applied.
-
-    Raises:
-        VisibilityBuilderError: An unknown name or a value the step refuses.
-    """
-    base = base or BuildConfig()
-    sections: dict[str, dict[str, Any]] = {s: {} for s in _SECTIONS}
-    top: dict[str, Any] = {}
-    for name, value in values.items():
-        section, _, key = name.rpartition('.')
-        if not section:
-            if name not in ('descriptors_per_class', 'workers'):
-                raise VisibilityBuilderError(f'unknown build setting {name!r}')
-            top[name] = value
-            continue
-        if section not in sections or key not in {f.name for f in fields(
-                getattr(base, section))}:
-            raise VisibilityBuilderError(f'unknown build setting {name!r}')
-        sections[section][key] = value
-    try:
-        changed = {s: replace(getattr(base, s), **v) for s, v in sections.items() if v}
-        return replace(base, **changed, **top)
-    except TypeError as error:
-        raise VisibilityBuilderError(f'bad build setting: {error}') from None
-
-
-def setting_descriptions(config: BuildConfig | None = None) -> dict[str, str]:
-    """``{'section.name': description}`` of every setting, from the config docstrings."""
-    config = config or BuildConfig()
-    out: dict[str, str] = {}
-    for section in _SECTIONS:
-        docs = attribute_docs(type(getattr(config, section)))
-        for key in asdict(getattr(config, section)):
-            out[f'{section}.{key}'] = docs.get(key, '')
-    top = attribute_docs(BuildConfig)
-    out['descriptors_per_class'] = top.get('descriptors_per_class', '')
-    out['workers'] = top.get('workers', '')
-    return out
 
 
 @dataclass
@@ -474,6 +351,12 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
                extra_features=int(sum(r.extra.size for r in database.regions)),
                descriptors=int(database.classes.descriptors.shape[0]),
                served=final.served, served_share=round(final.share, 6))
+
+    stages.begin('compact')
+    database, compaction = compact_database(
+        database, config.descriptor_bytes, config.points.patch_quality,
+        np.random.default_rng(dc.seed))
+    stages.end(**compaction.to_dict())
 
     if db_path is not None:
         stages.begin('write', str(db_path))

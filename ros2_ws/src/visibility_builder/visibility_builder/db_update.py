@@ -57,21 +57,20 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from landmark_db.database import FeatureClasses, LandmarkDatabase, ModelView, RegionRecord
+from landmark_db.database import FeatureClasses, LandmarkDatabase, RegionRecord
 from landmark_db.database.build_info import utc_now_iso
-from landmark_db.decomposition import decompose, service
-from landmark_db.decomposition.overlap import covered_poses, neighbourhood_matrix
-from landmark_db.decomposition.set_cover import solve_set_cover
+from landmark_db.database.codebook import DescriptorCodebook
+from landmark_db.database.compact import compact_database
+from landmark_db.decomposition import service
 from landmark_db.errors import LandmarkDbError
 from landmark_db.workers import available_cores
-from landmark_db.world import WorldInstance
 from vbn_common.errors import VbnCommonError
 from vbn_common.exploration import Exploration, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
 from vbn_common.geometry.frames import world_points_to_camera
 from visibility_builder.build import BuildConfig, config_from_flat
+from visibility_builder.build_config import TOP_SETTINGS
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.model_views import ImageTable, extra_features, select_model_views
 from visibility_builder.update_classes import (
     looked_at,
     merge_classes,
@@ -79,6 +78,7 @@ from visibility_builder.update_classes import (
     new_classes,
     select_points,
 )
+from visibility_builder.update_regions import image_table, new_regions, replace_visibility
 
 __all__ = ['UpdateConfig', 'UpdateResult', 'assign_images', 'build_config_of',
            'label_features', 'update_database']
@@ -145,7 +145,7 @@ def build_config_of(database: LandmarkDatabase) -> BuildConfig:
     """Return the build settings the database was built with (as far as it stores them)."""
     info = database.info
     flat = {k: v for k, v in info.parameters.items()
-            if '.' in k or k in ('descriptors_per_class', 'workers')}
+            if '.' in k or k in TOP_SETTINGS}
     config = config_from_flat(flat)
     sift = SiftConfig(**{k: v for k, v in info.sift.items()
                          if k in {f.name for f in fields(SiftConfig)}})
@@ -222,7 +222,8 @@ def _median_spacing(xy: np.ndarray) -> float:
 def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any,
                    config: UpdateConfig, classes: FeatureClasses,
                    matcher: cv2.DescriptorMatcher, class_points: np.ndarray,
-                   near_visible: np.ndarray) -> np.ndarray:
+                   near_visible: np.ndarray,
+                   codebook: DescriptorCodebook | None = None) -> np.ndarray:
     """Return ``(n,)`` the database class of each feature of one update image (-1: none).
 
     Two ways to a class, as the module docstring says: *guided*, a class the old
@@ -243,7 +244,11 @@ def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any
             from the camera height).
         near_visible: ``(n_classes,)`` bool, classes the old visibility had at the
             image's pose or a neighbour.
+        codebook: the database's descriptor codebook, when its descriptors are codes:
+            distances to them are judged as the original descriptors' would be
+            (:meth:`~landmark_db.database.codebook.DescriptorCodebook.true_distances`).
     """
+    true = codebook.true_distances if codebook is not None else np.asarray
     n = len(features)
     labels = np.full(n, -1, np.int64)
     if n == 0:
@@ -267,8 +272,8 @@ def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any
             if not near:
                 continue
             own = classes.descriptors[classes.offsets[c]:classes.offsets[c + 1]]
-            distance = np.linalg.norm(descriptors[near][:, None] - own[None].astype(np.float32),
-                                      axis=2).min(axis=1)
+            distance = true(np.linalg.norm(descriptors[near][:, None]
+                                           - own[None].astype(np.float32), axis=2).min(axis=1))
             best = int(np.argmin(distance))
             if distance[best] <= config.max_descriptor_distance:
                 pairs.append((float(distance[best]), int(near[best]), int(c)))
@@ -280,8 +285,8 @@ def label_features(features: ImageFeatures, camera_pose: np.ndarray, camera: Any
         rows = np.array([m[0].queryIdx for m in matches])
         index = np.array([[x.trainIdx for x in m] + [m[0].trainIdx] * (k - len(m))
                           for m in matches])
-        distance = np.array([[x.distance for x in m] + [np.inf] * (k - len(m))
-                             for m in matches])
+        distance = true(np.array([[x.distance for x in m] + [np.inf] * (k - len(m))
+                                  for m in matches]))
         cls = owner[index]
         first = cls[:, 0]
         other = np.where(cls != first[:, None], distance, np.inf).min(axis=1)
@@ -356,7 +361,7 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
     for i, feats in features.items():
         labels[i] = label_features(
             feats, cameras[i], camera, config, classes, matcher, class_points,
-            np.asarray(near[int(pose_of[i])].todense()).ravel())
+            np.asarray(near[int(pose_of[i])].todense()).ravel(), database.codebook)
     updated = np.unique(pose_of[list(features)])
     blocked = enclosed_poses(database.poses.xy, updated, config.enclosed_m)
     # What the updated poses see now; the blocked ones see nothing; the rest as before.
@@ -419,8 +424,8 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
     needed = service(world, [r.poses for r in kept], info.k, info.rho).unserved
     added: list[RegionRecord] = []
     if needed.size:
-        added = _new_regions(database, world, visibility, needed, build_config,
-                             _image_table(database, updated, features, labels, pose_of,
+        added = new_regions(database, visibility, blocked, needed, build_config,
+                             image_table(database, updated, features, labels, pose_of,
                                           cameras, frames))
     regions = tuple(kept) + tuple(added)
     after = service(world, [r.poses for r in regions], info.k, info.rho)
@@ -433,6 +438,11 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
         new = LandmarkDatabase(info=updated_info, poses=poses,
                                classes=merged, regions=regions,
                                uncovered=after.unserved, points=points)
+        # The kept regions keep their codes: the new descriptors take the same codebook.
+        new, _ = compact_database(
+            new, database.codebook.code_size if database.codebook is not None
+            else build_config.descriptor_bytes, build_config.points.patch_quality,
+            np.random.default_rng(build_config.decomposition.seed), database.codebook)
     except LandmarkDbError as error:
         raise VisibilityBuilderError(f'the updated database is not consistent: {error}'
                                      ) from None
@@ -466,24 +476,6 @@ def _trimmed(region: RegionRecord, visibility: sp.csr_matrix, config: BuildConfi
                         model_views=views)
 
 
-def replace_visibility(database: LandmarkDatabase, visibility: sp.csr_matrix,
-                       blocked: np.ndarray | None = None) -> WorldInstance:
-    """Return the database's world instance with another visibility.
-
-    ``blocked`` poses (furniture stands there now) leave the pose graph: no robot
-    stands there, so no region's neighbourhood reaches through them (a pose that sees
-    nothing in a neighbourhood would leave no feature common to it).
-    """
-    world = database.to_world_instance()
-    edges = database.poses.edges
-    if blocked is not None and len(blocked):
-        edges = edges[~np.isin(edges, blocked).any(axis=1)]
-    return WorldInstance.from_visibility(
-        world.poses, edges, visibility,
-        feature_ids=np.arange(visibility.shape[1], dtype=np.int64),
-        spacing=database.poses.spacing, name=world.name)
-
-
 def _check_camera(database: LandmarkDatabase, exploration: Exploration, bag: Any) -> None:
     info, camera = exploration.camera_info, database.info.camera
     same = (info.width, info.height) == (camera.width, camera.height) and np.allclose(
@@ -495,82 +487,3 @@ def _check_camera(database: LandmarkDatabase, exploration: Exploration, bag: Any
             f'update bag {bag}: its camera ({info.width} x {info.height}, fx '
             f"{float(np.ravel(info.k)[0]):g}) is not the database's ({camera.width} x "
             f'{camera.height}, fx {float(camera.K[0, 0]):g}): a bag of another robot?')
-
-
-def _image_table(database: LandmarkDatabase, updated: np.ndarray,
-                 features: dict[int, ImageFeatures], labels: dict[int, np.ndarray],
-                 pose_of: np.ndarray, cameras: np.ndarray, frames: Any) -> ImageTable:
-    """Return the images model views may come from: the update's, old views elsewhere."""
-    pose, stamp, xy, yaw, feats, labs = [], [], [], [], [], []
-    for i in sorted(features):
-        pose.append(int(pose_of[i]))
-        stamp.append(int(frames[i].stamp_ns))
-        xy.append(cameras[i, :2])
-        yaw.append(float(cameras[i, 2]))
-        feats.append(features[i])
-        labs.append(labels[i])
-    seen: set[tuple[int, int]] = set()
-    for region in database.regions:
-        for view in region.model_views:
-            key = (view.image_index, view.image_stamp_ns)
-            if view.pose in updated or key in seen:
-                continue
-            seen.add(key)
-            pose.append(view.pose)
-            stamp.append(view.image_stamp_ns)
-            xy.append(np.array([view.x, view.y]))
-            yaw.append(view.yaw)
-            feats.append(_view_features(view))
-            labs.append(view.class_ids)
-    return ImageTable(pose=np.asarray(pose, np.int64), stamp_ns=np.asarray(stamp, np.int64),
-                      camera_xy=np.asarray(xy, float).reshape(-1, 2),
-                      camera_yaw=np.asarray(yaw, float), features=feats, labels=labs)
-
-
-def _view_features(view: ModelView) -> ImageFeatures:
-    m = len(view)
-    zeros = np.zeros(m, np.float32)
-    return ImageFeatures(keypoints=view.keypoints, sizes=zeros, angles=zeros,
-                         responses=zeros, descriptors=view.descriptors)
-
-
-def _new_regions(database: LandmarkDatabase, world: WorldInstance,
-                 visibility: sp.csr_matrix, needed: np.ndarray, config: BuildConfig,
-                 table: ImageTable) -> list[RegionRecord]:
-    """Regions of a new decomposition that serve ``needed``, fewest first, with views."""
-    dc = config.decomposition
-    try:
-        decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed)
-    except LandmarkDbError as error:
-        raise VisibilityBuilderError(f'the updated world cannot be decomposed: {error}'
-                                     ) from None
-    neighbourhoods = neighbourhood_matrix(world.adjacency, dc.rho)
-    candidates, served = [], []
-    for region in decomposition.regions:
-        poses = np.unique(region.poses).astype(np.int64)
-        serves = np.flatnonzero(covered_poses(neighbourhoods, [poses]))
-        serves = np.intersect1d(serves, needed)
-        if serves.size:
-            candidates.append(region)
-            served.append(serves)
-    if not candidates:
-        return []
-    reachable = np.unique(np.concatenate(served))
-    chosen, _ = solve_set_cover(world.n_poses, reachable, served)
-    regions = []
-    for index in chosen:
-        region = candidates[int(index)]
-        poses = np.unique(region.poses).astype(np.int64)
-        landmark = np.asarray(region.features, np.int64)
-        extra = extra_features(visibility, poses, landmark, config.model_views)
-        try:
-            views = select_model_views(table, poses, landmark, extra, config.model_views)
-        except VisibilityBuilderError:
-            raise VisibilityBuilderError(
-                f'the update would leave a region (poses {poses[:6].tolist()}'
-                f'{"..." if poses.size > 6 else ""}) without a model view: no image of the '
-                'update or of the kept model views there shows its whole landmark; '
-                're-explore that area too') from None
-        regions.append(RegionRecord(poses=poses, landmark=landmark, extra=extra,
-                                    model_views=views))
-    return regions

@@ -65,6 +65,8 @@ class PointsConfig:
         patch_min_views: only a point seen by at least this many exploration images
             keeps a patch (those seen by more measure as well or better, and the
             patches are most of a point's bytes).
+        patch_quality: JPEG quality the file stores the patches at, 1 to 100 (0: whole
+            pixels); at 80 a 15 px patch takes about 50 bytes instead of 225.
     """
 
     enabled: bool = True
@@ -74,8 +76,14 @@ class PointsConfig:
     max_error_px: float = 1.5
     patch_px: int = 15
     patch_min_views: int = 8
+    patch_quality: int = 80
 
     def __post_init__(self) -> None:
+        if isinstance(self.patch_quality, bool) or \
+                int(self.patch_quality) != self.patch_quality or \
+                not 0 <= self.patch_quality <= 100:
+            raise VisibilityBuilderError(f'points.patch_quality must be an integer 0..100 '
+                                         f'(0: whole), got {self.patch_quality!r}')
         if isinstance(self.patch_min_views, bool) or \
                 int(self.patch_min_views) != self.patch_min_views or self.patch_min_views < 2:
             raise VisibilityBuilderError(f'points.patch_min_views must be an integer >= 2, '

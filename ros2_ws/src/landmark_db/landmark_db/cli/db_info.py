@@ -70,6 +70,9 @@ def format_summary(summary: dict[str, Any]) -> str:
         f'region features',
         f"  features:    {counts['classes']} classes, {counts['class_descriptors']} "
         f"descriptors, {counts['visibility']} pose-class sightings",
+        '  descriptors: ' + ('whole (128 bytes each)' if counts['descriptor_bytes'] == 128
+                             else f"{counts['descriptor_bytes']}-byte codes of a product "
+                             f'quantizer (the 32 kB codebook in the file)'),
         f"  poses:       {counts['poses']}, {counts['edges']} edges"
         + (f', spacing {spacing:g} m' if spacing is not None else '')
         + f", {counts['uncovered']} listed as uncovered",

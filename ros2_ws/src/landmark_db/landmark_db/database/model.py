@@ -31,7 +31,7 @@ kept for the matching symmetry check of Section 6.2.1; and :class:`BuildInfo` ca
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 import hashlib
 import json
@@ -45,6 +45,7 @@ import scipy.sparse as sp
 from landmark_db.database.build_info import (
     BuildInfo,
 )
+from landmark_db.database.codebook import DescriptorCodebook
 from landmark_db.database.fields import (
     ArrayEquality,
     bool_csr,
@@ -345,6 +346,10 @@ class LandmarkDatabase(ArrayEquality):
         uncovered: ``(u,)`` int64 sorted k-coverable poses no region covers (the
             decomposition's ``uncovered``).
         points: the scene points (:mod:`.points`; empty in a database built without).
+        codebook: the product quantizer the file stores the descriptors with
+            (:mod:`.codebook`; schema 5), or None: whole 128-byte descriptors. With a
+            codebook every descriptor must be one its codes decode to
+            (:meth:`quantized` makes them so); the writer refuses others.
 
     Derived (computed from the above, never stored twice): :attr:`membership`,
     :attr:`adjacency`, :meth:`to_world_instance`, :meth:`to_decomposition`.
@@ -360,8 +365,12 @@ class LandmarkDatabase(ArrayEquality):
     regions: tuple[RegionRecord, ...]
     uncovered: np.ndarray
     points: ScenePoints = field(default_factory=ScenePoints.empty)
+    codebook: DescriptorCodebook | None = None
 
     def __post_init__(self) -> None:
+        if self.codebook is not None and not isinstance(self.codebook, DescriptorCodebook):
+            raise LandmarkDbError(f'codebook must be a DescriptorCodebook or None, got '
+                                  f'{type(self.codebook).__name__}')
         for name, kind in (('info', BuildInfo), ('poses', SampledPoses),
                            ('classes', FeatureClasses)):
             if not isinstance(getattr(self, name), kind):
@@ -502,7 +511,33 @@ class LandmarkDatabase(ArrayEquality):
             if self.points.has_patches:  # (schema 3 files have none: their digests hold)
                 add(self.points.patches)
                 add(self.points.patch_axes)
+        if self.codebook is not None:  # (files before schema 5 have none: their digests hold)
+            add(self.codebook.centroids)
+            add([self.codebook.rms_error])
         return digest.hexdigest()
+
+    def descriptor_arrays(self) -> list[np.ndarray]:
+        """Every descriptor array: the classes', each model view's, the scene points'."""
+        return [self.classes.descriptors,
+                *(view.descriptors for region in self.regions for view in region.model_views),
+                self.points.descriptors]
+
+    def quantized(self, codebook: DescriptorCodebook | None) -> LandmarkDatabase:
+        """Return this database with ``codebook``, every descriptor replaced by its code's.
+
+        None returns the database with whole descriptors as they are (no codebook).
+        """
+        if codebook is None:
+            return replace(self, codebook=None)
+        regions = tuple(replace(region, model_views=tuple(
+            replace(view, descriptors=codebook.quantize(view.descriptors))
+            for view in region.model_views)) for region in self.regions)
+        return replace(
+            self, classes=replace(self.classes,
+                                  descriptors=codebook.quantize(self.classes.descriptors)),
+            regions=regions, codebook=codebook,
+            points=replace(self.points, descriptors=codebook.quantize(self.points.descriptors))
+            if self.points.n_points else self.points)
 
     def to_world_instance(self) -> WorldInstance:
         """Return the world instance: poses, G, and feature id ``c`` = class ``c``."""

@@ -17,7 +17,7 @@ database class of a point, or -1 for a point the filters did not keep.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -28,6 +28,7 @@ from landmark_db.database.fields import (
     int_array,
     set_field,
 )
+from landmark_db.database.patch_codec import decode_patches, encode_patches
 from landmark_db.errors import LandmarkDbError
 
 __all__ = ['SEEN_MARGIN_M', 'ScenePoints']
@@ -63,6 +64,9 @@ class ScenePoints(ArrayEquality):
             through it facing that exploration camera, that move its projection one
             pixel right and one pixel down in the patch; NaN rows where a point has no
             patch. With them a frame's pose predicts the patch's affine warp.
+        patch_code: the patches of the points that have one, in order, as the file
+            stores them (:mod:`.patch_codec`, schema 5), or None: stored whole.
+            :attr:`patches` is then what the code decodes to (checked).
     """
 
     xyz: np.ndarray
@@ -72,6 +76,7 @@ class ScenePoints(ArrayEquality):
     seen_from: np.ndarray | None = None
     patches: np.ndarray | None = None
     patch_axes: np.ndarray | None = None
+    patch_code: bytes | None = None
 
     def __post_init__(self) -> None:
         xyz = float_array(self.xyz, 'scene points', (None, 3))
@@ -104,6 +109,43 @@ class ScenePoints(ArrayEquality):
                             ('seen_from', seen_from), ('patches', patches),
                             ('patch_axes', axes)):
             set_field(self, name, value)
+        if self.patch_code is not None:
+            if not isinstance(self.patch_code, bytes):
+                raise LandmarkDbError(f'scene point patch_code must be bytes, got '
+                                      f'{type(self.patch_code).__name__}')
+            mask = self.patch_mask
+            if not mask.any() or not np.array_equal(decode_patches(
+                    self.patch_code, int(mask.sum()), patches.shape[1]), patches[mask]):
+                raise LandmarkDbError('scene point patches differ from what their code '
+                                      'decodes to')
+
+    def compact(self, jpeg_quality: int | None) -> ScenePoints:
+        """Return the points as schema 5 stores them in the fewest bytes, exactly.
+
+        Points rounded to float32 (micrometres within a kilometre); where they were
+        seen from rounded to float16 as an offset from the point and a radius (at most
+        16 mm off within 32 m of the point, against the 0.15 m margin it is searched
+        with); patch axes to float16 (a 2**-11 relative error: a thousandth of a pixel
+        across a patch); the patches coded as JPEG at ``jpeg_quality`` (None: kept
+        whole).
+        """
+        xyz = self.xyz.astype(np.float32).astype(np.float64)
+        seen = self.seen_from
+        if self.has_seen_from:
+            offset = (seen[:, :2] - xyz[:, :2]).astype(np.float16).astype(np.float64)
+            seen = np.column_stack([xyz[:, :2] + offset,
+                                    seen[:, 2].astype(np.float16).astype(np.float64)])
+        if not self.has_patches:
+            return replace(self, xyz=xyz, seen_from=seen, patch_code=None)
+        axes = self.patch_axes.astype(np.float16).astype(np.float32)
+        patches, code = self.patches, self.patch_code  # (coded once, never again)
+        if jpeg_quality is not None and code is None:
+            mask = self.patch_mask
+            code = encode_patches(patches[mask], jpeg_quality)
+            patches = patches.copy()
+            patches[mask] = decode_patches(code, int(mask.sum()), patches.shape[1])
+        return replace(self, xyz=xyz, seen_from=seen, patches=patches, patch_axes=axes,
+                       patch_code=code)
 
     @property
     def has_patches(self) -> bool:

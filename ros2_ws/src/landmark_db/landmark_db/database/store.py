@@ -33,28 +33,35 @@ import time
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
 
 from landmark_db.atomic import atomic_output
 from landmark_db.database.build_info import BuildInfo
-from landmark_db.database.fields import DESCRIPTOR_SIZE
 from landmark_db.database.model import (
-    FeatureClasses,
     LandmarkDatabase,
-    ModelView,
     RegionAdjacency,
-    RegionRecord,
     SampledPoses,
 )
 from landmark_db.database.points_sql import insert_points, load_points
 from landmark_db.database.schema import (
     APPLICATION_ID,
     APPLICATION_NAME,
-    REQUIRED_TABLES,
     SCHEMA_SQL,
     SCHEMA_VERSION,
+    required_tables,
 )
-from landmark_db.database.sql_rows import check_ids, has_table, rows_array
+from landmark_db.database.sql_rows import (
+    check_ids,
+    has_table,
+    load_codebook,
+    rows_array,
+    write_codebook,
+)
+from landmark_db.database.tables_sql import (
+    insert_classes,
+    insert_regions,
+    load_classes,
+    load_regions,
+)
 from landmark_db.errors import LandmarkDbError
 
 __all__ = ['DatabaseSummary', 'database_image', 'database_summary', 'open_database',
@@ -131,9 +138,10 @@ def _insert_all(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
     ])
     _insert_build_parameters(connection, db)
     _insert_poses(connection, db.poses)
-    _insert_classes(connection, db.classes)
-    _insert_regions(connection, db)
-    insert_points(connection, db.points)
+    write_codebook(connection, db.codebook)
+    insert_classes(connection, db.classes, db.codebook)
+    insert_regions(connection, db)
+    insert_points(connection, db.points, db.codebook)
 
 
 def _insert_build_parameters(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
@@ -151,58 +159,6 @@ def _insert_poses(connection: sqlite3.Connection, poses: SampledPoses) -> None:
     connection.executemany('INSERT INTO edges VALUES (?, ?, ?)',
                            zip(range(poses.edges.shape[0]), poses.edges[:, 0].tolist(),
                                poses.edges[:, 1].tolist()))
-
-
-def _insert_classes(connection: sqlite3.Connection, classes: FeatureClasses) -> None:
-    visibility = classes.visibility
-    seen_by = np.bincount(visibility.indices, minlength=classes.n_classes)
-    connection.executemany('INSERT INTO classes VALUES (?, ?, ?)',
-                           zip(range(classes.n_classes), np.diff(classes.offsets).tolist(),
-                               seen_by.tolist()))
-    owners = classes.descriptor_classes
-    ordinals = np.arange(owners.size) - classes.offsets[owners]
-    blobs = (row.tobytes() for row in classes.descriptors)
-    connection.executemany('INSERT INTO class_descriptors VALUES (?, ?, ?)',
-                           zip(owners.tolist(), ordinals.tolist(), blobs))
-    if classes.n_classes > np.iinfo(np.int32).max:
-        raise LandmarkDbError(f'{classes.n_classes} classes do not fit the int32 '
-                              f'visibility lists')
-    ids = visibility.indices.astype('<i4')
-    bounds = visibility.indptr.tolist()
-    connection.executemany('INSERT INTO visibility VALUES (?, ?)',
-                           ((pose, ids[bounds[pose]:bounds[pose + 1]].tobytes())
-                            for pose in range(visibility.shape[0])))
-
-
-def _insert_regions(connection: sqlite3.Connection, db: LandmarkDatabase) -> None:
-    view_id = 0
-    for r, region in enumerate(db.regions):
-        connection.execute('INSERT INTO regions VALUES (?, ?, ?, ?, ?)',
-                           (r, region.poses.size, region.landmark.size, region.extra.size,
-                            len(region.model_views)))
-        connection.executemany('INSERT INTO region_poses VALUES (?, ?)',
-                               ((r, pose) for pose in region.poses.tolist()))
-        connection.executemany(
-            'INSERT INTO region_features VALUES (?, ?, ?, ?)',
-            [(r, c, 'landmark', i) for i, c in enumerate(region.landmark.tolist())]
-            + [(r, c, 'extra', i) for i, c in enumerate(region.extra.tolist())])
-        for ordinal, view in enumerate(region.model_views):
-            connection.execute(
-                'INSERT INTO model_views VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)',
-                (view_id, r, ordinal, view.pose, view.image_stamp_ns, view.image_index,
-                 view.x, view.y, view.yaw, len(view)))
-            connection.execute(
-                'INSERT INTO model_view_features VALUES (?, ?, ?, ?)',
-                (view_id, view.class_ids.astype('<i8').tobytes(),
-                 view.keypoints.astype('<f4').tobytes(), view.descriptors.tobytes()))
-            view_id += 1
-    adjacency = db.adjacency
-    connection.executemany(
-        'INSERT INTO region_adjacency VALUES (?, ?, ?, ?)',
-        zip(adjacency.pairs[:, 0].tolist(), adjacency.pairs[:, 1].tolist(),
-            adjacency.shared_poses.tolist(), adjacency.joining_edges.tolist()))
-    connection.executemany('INSERT INTO uncovered VALUES (?)',
-                           ((pose,) for pose in db.uncovered.tolist()))
 
 
 # --- reading ------------------------------------------------------------------------
@@ -279,19 +235,20 @@ _COUNT_QUERIES = {
     'poses': 'SELECT COUNT(*) FROM poses',
     'edges': 'SELECT COUNT(*) FROM edges',
     'classes': 'SELECT COUNT(*) FROM classes',
-    'class_descriptors': 'SELECT COUNT(*) FROM class_descriptors',
-    'visibility': 'SELECT COALESCE(SUM(length(class_ids)), 0) / 4 FROM visibility',
+    'class_descriptors': 'SELECT COALESCE(SUM(n_descriptors), 0) FROM classes',
+    'visibility': 'SELECT COALESCE(SUM(n_poses), 0) FROM classes',
     'regions': 'SELECT COUNT(*) FROM regions',
-    'region_poses': 'SELECT COUNT(*) FROM region_poses',
-    'landmark_features': "SELECT COUNT(*) FROM region_features WHERE role = 'landmark'",
-    'extra_features': "SELECT COUNT(*) FROM region_features WHERE role = 'extra'",
+    'region_poses': 'SELECT COALESCE(SUM(n_poses), 0) FROM regions',
+    'landmark_features': 'SELECT COALESCE(SUM(n_landmark), 0) FROM regions',
+    'extra_features': 'SELECT COALESCE(SUM(n_extra), 0) FROM regions',
     'model_views': 'SELECT COUNT(*) FROM model_views',
     'model_view_features': 'SELECT COALESCE(SUM(n_features), 0) FROM model_views',
     'region_adjacency': 'SELECT COUNT(*) FROM region_adjacency',
     'uncovered': 'SELECT COUNT(*) FROM uncovered',
 }
-# Schema 2's table (counted when the file has it).
+# The scene points of schemas 2 to 4 and of schema 5 (counted when the file has them).
 _POINT_COUNT = 'SELECT COUNT(*) FROM scene_points'
+_POINT_SHAPE = "SELECT shape FROM scene_point_columns WHERE name = 'xyz'"
 
 
 def database_summary(path: str | Path) -> DatabaseSummary:
@@ -309,6 +266,13 @@ def database_summary(path: str | Path) -> DatabaseSummary:
                       for name, sql in _COUNT_QUERIES.items()}
             if has_table(connection, 'scene_points'):
                 counts['scene_points'] = int(connection.execute(_POINT_COUNT).fetchone()[0])
+            code = connection.execute('SELECT code_size FROM descriptor_codebook'
+                                      ).fetchone() if has_table(
+                connection, 'descriptor_codebook') else None
+            counts['descriptor_bytes'] = int(code[0]) if code else 128
+            if has_table(connection, 'scene_point_columns'):
+                shape = connection.execute(_POINT_SHAPE).fetchone()
+                counts['scene_points'] = int(json.loads(shape[0])[0]) if shape else 0
             build = {key: json.loads(value) for key, value in connection.execute(
                 'SELECT key, value FROM build_parameters ORDER BY key')}
             table_bytes = _table_bytes(connection)
@@ -405,7 +369,7 @@ def _check_file(connection: sqlite3.Connection, path: str | Path) -> None:
             raise LandmarkDbError(f'{path}: damaged database ({_shorten(detail)})')
         tables = {row[0] for row in connection.execute(
             "SELECT name FROM sqlite_master WHERE type = 'table'")}
-        required = REQUIRED_TABLES + (('scene_points',) if version >= 2 else ())
+        required = required_tables(version)
         missing = [name for name in required if name not in tables]
         if missing:
             raise LandmarkDbError(f'{path}: damaged database: table {missing[0]!r} is '
@@ -448,94 +412,13 @@ def _load(connection: sqlite3.Connection) -> tuple[LandmarkDatabase, RegionAdjac
                          build['pose_spacing'])
     n = poses.n_poses
 
-    counts = rows_array(connection, 'SELECT id, n_descriptors FROM classes ORDER BY id',
-                    np.int64, 2)
-    check_ids(counts[:, 0], 'classes')
-    rows = connection.execute('SELECT class_id, descriptor FROM class_descriptors '
-                              'ORDER BY class_id, ordinal').fetchall()
-    owners = np.array([row[0] for row in rows], dtype=np.int64)
-    blobs = [row[1] for row in rows]
-    if any(len(blob) != DESCRIPTOR_SIZE for blob in blobs):
-        raise LandmarkDbError(f'a class descriptor is not {DESCRIPTOR_SIZE} bytes')
-    n_classes = counts.shape[0]
-    if owners.size and (owners.min() < 0 or owners.max() >= n_classes):
-        raise LandmarkDbError('a class descriptor belongs to no class')
-    per_class = np.bincount(owners, minlength=n_classes)
-    if not np.array_equal(per_class, counts[:, 1]):
-        raise LandmarkDbError('class descriptor counts differ from the classes table')
-    descriptors = np.frombuffer(b''.join(blobs), dtype=np.uint8).reshape(-1, DESCRIPTOR_SIZE)
-    offsets = np.concatenate([[0], np.cumsum(per_class)]).astype(np.int64)
-    rows = connection.execute('SELECT pose, class_ids FROM visibility ORDER BY pose'
-                              ).fetchall()
-    if [row[0] for row in rows] != list(range(n)):
-        raise LandmarkDbError(f'visibility does not list poses 0..{n - 1}')
-    if any(len(row[1]) % 4 for row in rows):
-        raise LandmarkDbError('a visibility list is not a whole number of int32 ids')
-    indices = np.frombuffer(b''.join(row[1] for row in rows), dtype='<i4').astype(np.int64)
-    indptr = np.concatenate([[0], np.cumsum([len(row[1]) // 4 for row in rows])])
-    if indices.size and (indices.min() < 0 or indices.max() >= n_classes):
-        raise LandmarkDbError('visibility holds a class out of range')
-    visibility = sp.csr_matrix((np.ones(indices.size, dtype=bool), indices,
-                                indptr.astype(np.int64)), shape=(n, n_classes))
-    classes = FeatureClasses(descriptors, offsets, visibility)
-
-    regions = _load_regions(connection)
+    codebook = load_codebook(connection)
+    version = int(connection.execute('PRAGMA user_version').fetchone()[0])
+    classes = load_classes(connection, version, n, codebook)
+    regions = load_regions(connection, version, n, classes.n_classes, codebook)
     uncovered = rows_array(connection, 'SELECT pose FROM uncovered ORDER BY pose', np.int64, 1)
     db = LandmarkDatabase(info, poses, classes, regions, uncovered[:, 0],
-                          load_points(connection))
+                          load_points(connection, codebook), codebook)
     stored = rows_array(connection, 'SELECT region_a, region_b, shared_poses, joining_edges '
                     'FROM region_adjacency ORDER BY region_a, region_b', np.int64, 4)
     return db, RegionAdjacency(stored[:, :2], stored[:, 2], stored[:, 3])
-
-
-def _load_regions(connection: sqlite3.Connection) -> tuple[RegionRecord, ...]:
-    table = rows_array(connection, 'SELECT id, n_poses, n_landmark, n_extra, n_model_views '
-                   'FROM regions ORDER BY id', np.int64, 5)
-    check_ids(table[:, 0], 'regions')
-    n_regions = table.shape[0]
-    members = rows_array(connection, 'SELECT region, pose FROM region_poses '
-                     'ORDER BY region, pose', np.int64, 2)
-    features = rows_array(connection, "SELECT region, role = 'landmark', ordinal, class_id "
-                      'FROM region_features', np.int64, 4)
-    # Per region: landmark (flag 1) first, then extra, each in stored order.
-    features = features[np.lexsort((features[:, 2], -features[:, 1], features[:, 0]))]
-    views = connection.execute(
-        'SELECT v.region, v.pose, v.image_stamp_ns, v.image_index, v.x, v.y, v.yaw, '
-        'v.n_features, f.class_ids, f.keypoints, f.descriptors FROM model_views AS v '
-        'JOIN model_view_features AS f ON f.view = v.id ORDER BY v.region, v.ordinal'
-    ).fetchall()
-    view_regions = np.array([row[0] for row in views], dtype=np.int64)
-    for name, values, expected in (('pose', members[:, 0], table[:, 1]),
-                                   ('feature', features[:, 0], table[:, 2] + table[:, 3]),
-                                   ('model view', view_regions, table[:, 4])):
-        if values.size and (values.min() < 0 or values.max() >= n_regions):
-            raise LandmarkDbError(f'a region {name} belongs to no region')
-        if not np.array_equal(np.bincount(values, minlength=n_regions), expected):
-            raise LandmarkDbError(f'region {name} counts differ from the regions table')
-    pose_bounds = np.searchsorted(members[:, 0], np.arange(n_regions + 1))
-    feature_bounds = np.searchsorted(features[:, 0], np.arange(n_regions + 1))
-    view_bounds = np.searchsorted(view_regions, np.arange(n_regions + 1))
-    regions = []
-    for r in range(n_regions):
-        own = features[feature_bounds[r]:feature_bounds[r + 1]]
-        if int(own[:, 1].sum()) != table[r, 2]:
-            raise LandmarkDbError(f'region {r} landmark count differs from the regions table')
-        model_views = tuple(_model_view(row) for row in
-                            views[view_bounds[r]:view_bounds[r + 1]])
-        regions.append(RegionRecord(members[pose_bounds[r]:pose_bounds[r + 1], 1],
-                                    own[own[:, 1] == 1, 3], own[own[:, 1] == 0, 3],
-                                    model_views))
-    return tuple(regions)
-
-
-def _model_view(row: tuple[Any, ...]) -> ModelView:
-    _, pose, stamp, image_index, x, y, yaw, m, class_blob, keypoint_blob, descriptor_blob \
-        = row
-    if (len(class_blob) != 8 * m or len(keypoint_blob) != 8 * m
-            or len(descriptor_blob) != DESCRIPTOR_SIZE * m):
-        raise LandmarkDbError(f'model view of image {image_index}: feature arrays do not '
-                              f'hold {m} features')
-    return ModelView(pose, stamp, image_index, x, y, yaw,
-                     np.frombuffer(class_blob, dtype='<i8'),
-                     np.frombuffer(keypoint_blob, dtype='<f4').reshape(m, 2),
-                     np.frombuffer(descriptor_blob, dtype=np.uint8).reshape(m, DESCRIPTOR_SIZE))
