@@ -156,8 +156,12 @@ def test_missing_table(db_file, tmp_path):
      'checksum'),
 ])
 def test_inconsistent_contents(db_file, tmp_path, statement, message):
-    path = edited_copy(db_file, tmp_path / 'edited.db', statement)
-    text = refused_open_only(path)
+    refused_after(db_file, tmp_path, statement, message)
+
+
+def refused_after(source: Path, tmp_path: Path, statement: str, message: str) -> None:
+    """A copy of ``source`` damaged by ``statement`` is refused with ``message``."""
+    text = refused_open_only(edited_copy(source, tmp_path / 'edited.db', statement))
     assert 'damaged database' in text and message in text
 
 
@@ -172,9 +176,7 @@ def test_inconsistent_contents(db_file, tmp_path, statement, message):
      'the patch code holds 0 patches, not 11'),
 ])
 def test_inconsistent_compact_contents(coded_file, tmp_path, statement, message):
-    path = edited_copy(coded_file, tmp_path / 'edited.db', statement)
-    text = refused_open_only(path)
-    assert 'damaged database' in text and message in text
+    refused_after(coded_file, tmp_path, statement, message)
 
 
 SCHEMA_4 = TESTS / 'data' / 'schema4_sample.db'
@@ -197,9 +199,7 @@ SCHEMA_4 = TESTS / 'data' / 'schema4_sample.db'
      'not all one odd square size'),
 ])
 def test_inconsistent_schema_4_contents(tmp_path, statement, message):
-    path = edited_copy(SCHEMA_4, tmp_path / 'edited.db', statement)
-    text = refused_open_only(path)
-    assert 'damaged database' in text and message in text
+    refused_after(SCHEMA_4, tmp_path, statement, message)
 
 
 def schema_4_sample():
