@@ -174,6 +174,10 @@ def refused_after(source: Path, tmp_path: Path, statement: str, message: str) ->
      'patch code'),
     ("UPDATE scene_point_columns SET data = zeroblob(length(data)) WHERE name = 'patches'",
      'the patch code holds 0 patches, not 11'),
+    ("UPDATE scene_point_columns SET dtype = '<f2', data = zeroblob(22) "
+     "WHERE name = 'patch_points'", 'axes disagree'),
+    ("UPDATE scene_point_columns SET shape = '[11, 100000000, 100000000]' "
+     "WHERE name = 'patches'", 'are not patches of a database'),
 ])
 def test_inconsistent_compact_contents(coded_file, tmp_path, statement, message):
     refused_after(coded_file, tmp_path, statement, message)

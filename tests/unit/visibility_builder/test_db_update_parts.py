@@ -165,6 +165,13 @@ def test_a_region_no_image_shows_is_drawn_again_with_what_the_images_show() -> N
     assert len(regions) == 1 and sorted(regions[0].landmark.tolist()) == [1, 2]
     assert regions[0].poses.tolist() == list(range(n))
     assert [v.pose for v in regions[0].model_views] == [0, 8]
+    # An image elsewhere that shows the whole landmark does not make the region's own
+    # images show it: the features they lack are still hidden, and the region redrawn.
+    elsewhere = replace(table, pose=np.array([0, 9 - 1]),
+                        labels=[np.array([1, 2]), np.array([0, 1])])
+    regions = new_regions(db, visibility, np.zeros(0, np.int64), np.array([0]), config,
+                          replace(elsewhere, pose=np.array([0, 0])))
+    assert [sorted(r.landmark.tolist()) for r in regions] == [[1, 2]]
     # Images that show only one class each: no landmark of 2 has a view.
     table = replace(table, labels=[np.array([1, -1]), np.array([2, -1])])
     with pytest.raises(VisibilityBuilderError, match='without a model view'):

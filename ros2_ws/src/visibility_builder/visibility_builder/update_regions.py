@@ -89,10 +89,11 @@ def new_regions(database: LandmarkDatabase, visibility: sp.csr_matrix,
     A region of the new decomposition may lie where neither the update's images nor the
     kept model views show its whole landmark (poses away from the update keep their old
     visibility, the old views list only their own regions' features): it is left out
-    when other candidates serve its poses. When none does, the landmark features the
-    image that shows most of it lacks are hidden from the decomposition at the region's
-    poses and it is drawn again, at most :data:`_REDRAWS` times; a needed pose that only
-    such a region could serve refuses the update.
+    when other candidates serve its poses. When none does, the landmark features that
+    the region's image showing most of it lacks (all of them, if no image was taken
+    there) are hidden from the decomposition at the region's poses and it is drawn
+    again, at most :data:`_REDRAWS` times; a needed pose that only such a region could
+    serve refuses the update.
     """
     dc = config.decomposition
     usable = visibility
@@ -115,7 +116,10 @@ def new_regions(database: LandmarkDatabase, visibility: sp.csr_matrix,
             break  # (hiding features left a pose the real world serves unserved)
         blind = found
         poses, landmark = blind
-        best = max(table.labels, key=lambda labels: int(np.isin(landmark, labels).sum()))
+        # (Model views come from the region's own images: judge only those.)
+        own = [table.labels[i] for i in table.images_of_poses(poses)]
+        best = max(own, key=lambda labels: int(np.isin(landmark, labels).sum())) \
+            if own else np.zeros(0, np.int64)
         usable = usable.tolil()
         for c in landmark[~np.isin(landmark, best)]:
             usable[poses, int(c)] = False

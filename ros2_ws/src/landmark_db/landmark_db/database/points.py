@@ -132,9 +132,13 @@ class ScenePoints(ArrayEquality):
         xyz = self.xyz.astype(np.float32).astype(np.float64)
         seen = self.seen_from
         if self.has_seen_from:
-            offset = (seen[:, :2] - xyz[:, :2]).astype(np.float16).astype(np.float64)
-            seen = np.column_stack([xyz[:, :2] + offset,
-                                    seen[:, 2].astype(np.float16).astype(np.float64)])
+            with np.errstate(over='ignore'):
+                offset = (seen[:, :2] - xyz[:, :2]).astype(np.float16).astype(np.float64)
+                radius = seen[:, 2].astype(np.float16).astype(np.float64)
+            if np.isfinite(offset).all() and np.isfinite(radius).all():
+                seen = np.column_stack([xyz[:, :2] + offset, radius])
+            else:  # (beyond float16, 65 km: float32, absolute)
+                seen = seen.astype(np.float32).astype(np.float64)
         if not self.has_patches:
             return replace(self, xyz=xyz, seen_from=seen, patch_code=None)
         axes = self.patch_axes.astype(np.float16).astype(np.float32)

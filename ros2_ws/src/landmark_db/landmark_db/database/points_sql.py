@@ -58,6 +58,7 @@ def insert_points(connection: sqlite3.Connection, points: ScenePoints,
 
 
 _FLOATS = ('<f2', '<f4', '<f8')
+_MAX_PATCH_PX = 255  # (a damaged shape would allocate before the code is read)
 _INTS = ('|u1', '<i2', '<u2', '<i4', '<i8')
 
 
@@ -168,11 +169,15 @@ def _load_columns(connection: sqlite3.Connection, codebook: DescriptorCodebook |
     if 'patches' in stored:
         dtype, shape, data = stored['patches']
         index = arrays.get('patch_points')
-        if index is None or 'patch_axes' not in arrays or len(index) != shape[0] or \
+        if index is None or index.dtype.kind not in 'iu' or 'patch_axes' not in arrays or \
+                len(index) != shape[0] or \
                 len(arrays['patch_axes']) != shape[0] or shape[1] != shape[2] or \
                 (index.size and (index.min() < 0 or index.max() >= n or
                                  np.any(np.diff(index) <= 0))):
             raise LandmarkDbError('scene point patches, their points and axes disagree')
+        if shape[1] > _MAX_PATCH_PX or not isinstance(data, bytes):
+            raise LandmarkDbError(f'scene point patches of {shape[1]} px are not '
+                                  f'patches of a database')
         if dtype == 'jpeg':
             code = data
             own = decode_patches(data, shape[0], shape[1])
