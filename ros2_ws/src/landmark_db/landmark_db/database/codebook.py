@@ -127,7 +127,9 @@ def train_codebook(descriptors: np.ndarray, code_size: int, rng: np.random.Gener
         iterations: Lloyd iterations after the seeding.
 
     Returns:
-        The codebook, with its RMS error over all ``descriptors``; with at most 256
+        The codebook, with its RMS error over the descriptors that trained it (a few
+        SIFT units below the error on others: :func:`~.compact.compact_database`
+        measures it on the whole database); with at most 256
         distinct sub-vectors in a column, each is its own centroid, and the codes are
         exact.
 
@@ -147,9 +149,7 @@ def train_codebook(descriptors: np.ndarray, code_size: int, rng: np.random.Gener
     centroids = np.empty((code_size, CENTROIDS, d), np.uint8)
     for j in range(code_size):
         centroids[j] = _kmeans(x[:, j * d:(j + 1) * d], rng, iterations)
-    book = DescriptorCodebook(centroids)
-    everything = np.asarray(descriptors)
-    change = book.quantize(everything).astype(np.float64) - everything
+    change = DescriptorCodebook(centroids).quantize(x).astype(np.float64) - x
     return DescriptorCodebook(centroids, float(np.sqrt(np.mean(np.sum(change ** 2, axis=1)))))
 
 

@@ -73,10 +73,11 @@ def compact_database(db: LandmarkDatabase, code_bytes: int, patch_quality: int,
         raise LandmarkDbError(f'patch quality must be an integer 0..100 (0: whole), got '
                               f'{patch_quality!r}')
     before = np.concatenate(db.descriptor_arrays())
+    trained = codebook is None and code_bytes != DESCRIPTOR_SIZE
     if code_bytes == DESCRIPTOR_SIZE:
         out = db.quantized(None)
     else:
-        if codebook is None:
+        if trained:
             codebook = train_codebook(before, code_bytes, rng)
         elif codebook.code_size != code_bytes:
             raise LandmarkDbError(f'the codebook codes {codebook.code_size} bytes, not '
@@ -84,6 +85,8 @@ def compact_database(db: LandmarkDatabase, code_bytes: int, patch_quality: int,
         out = db.quantized(codebook)
     after = np.concatenate(out.descriptor_arrays())
     change = float(np.sqrt(np.mean(np.sum((after.astype(np.float64) - before) ** 2, axis=1))))
+    if trained:  # its error on every descriptor it codes, not only on those it learnt from
+        out = replace(out, codebook=replace(codebook, rms_error=change))
     points = out.points.compact(patch_quality or None) if out.points.n_points else out.points
     coded = int(points.patch_mask.sum()) if points.patch_code is not None else 0
     return replace(out, points=points), Compaction(code_bytes, len(before), change, coded)
