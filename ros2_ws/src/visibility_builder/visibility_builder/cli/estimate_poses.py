@@ -14,9 +14,10 @@ time of each step and, when the bag has ``/ground_truth/pose``, the accuracy of 
 odometry, of the thesis's own result (directions alone, scaled by the odometry's path),
 of the joint solve with the odometry, of the unrefined result and of the result after the
 bundle adjustment (:mod:`visibility_builder.estimation.refinement`), each after an SE(2)
-alignment. ``--known-distance I J METRES`` takes the scale from a distance measured
-between two images' places instead of the odometry's path (a wheel's scale error is
-invisible to the images). ``--report DIR`` draws the view graph and the odometry's
+alignment. The scale is the odometry's, its wheels calibrated by the images' turns
+(:mod:`visibility_builder.estimation.scale`; ``--no-wheel-calibration`` keeps it as it
+is). ``--known-distance I J METRES`` takes the scale from a distance measured between
+two images' places instead. ``--report DIR`` draws the view graph and the odometry's
 trajectory against the estimate (:mod:`visibility_builder.estimation.report`).
 """
 from __future__ import annotations
@@ -53,6 +54,10 @@ def register(subparsers: Any) -> None:
                         default=None,
                         help='scale from a measured distance between images I and J (0-based, '
                              "bag order) instead of the odometry's path length")
+    parser.add_argument('--no-wheel-calibration', action='store_true',
+                        help="keep the odometry's distances as they are (default: its "
+                             "wheels calibrated by the images' turns; turn off for an "
+                             "odometry whose heading comes from a gyro)")
     parser.add_argument('--report', metavar='DIR', default=None,
                         help='write view_graph.png, trajectories.png and summary.json here')
     parser.add_argument('--json', metavar='FILE', default=None,
@@ -71,14 +76,10 @@ def run(args: argparse.Namespace) -> int:
     from vbn_common.exploration import ReadConfig, read_exploration
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.estimation.accuracy import align_se2, pose_errors, similarity_scale
-    from visibility_builder.estimation.odometry_path import odometry_steps
-    from visibility_builder.estimation.pipeline import (
-        EstimationSettings,
-        check_known_distance,
-        estimate_poses,
-        scaled_to_distance,
-    )
+    from visibility_builder.estimation.odometry_path import odometry_steps, read_track
+    from visibility_builder.estimation.pipeline import EstimationSettings, estimate_poses
     from visibility_builder.estimation.pose_bag import write_estimated_bag
+    from visibility_builder.estimation.scale import check_known_distance, scaled_to_distance
 
     out = Path(args.out)
     if out.exists():
@@ -109,14 +110,16 @@ def run(args: argparse.Namespace) -> int:
                                          f'distance in metres, got {args.known_distance}'
                                          ) from None
         check_known_distance(len(exploration.frames), *known)     # before the estimation
-    settings = EstimationSettings(workers=args.workers)
+    settings = EstimationSettings(workers=args.workers,
+                                  wheel_calibration=not args.no_wheel_calibration)
     if args.window is not None:
         settings = replace(settings, window=args.window)
     if args.radius is not None:
         settings = replace(settings, radius_m=args.radius)
     progress = None if args.quiet or not sys.stderr.isatty() else _progress
     steps = odometry_steps(args.bag, exploration.stamps_ns(), exploration.base_poses())
-    result = estimate_poses(exploration, settings, progress, steps=steps)
+    result = estimate_poses(exploration, settings, progress, steps=steps,
+                            track=read_track(args.bag))
     if progress is not None:
         print(file=sys.stderr)
     if known is not None:
@@ -142,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         print(f'warning: the pairs join the places into {len(result.components)} pieces '
               f'({result.components[:5]}...): the largest is estimated, the others rest on '
               'the odometry')
+    if result.wheels is not None:
+        print(f'  {result.wheels.line()}')
     print('  times: ' + ', '.join(f'{k} {v:.1f} s' for k, v in result.times.items()))
     if result.refinement is not None:
         r = result.refinement
@@ -152,7 +157,9 @@ def run(args: argparse.Namespace) -> int:
                                'refused': result.refused, 'times': result.times,
                                'pieces': len(result.components),
                                'components': result.components[:10],
-                               'warnings': result.warnings}
+                               'warnings': result.warnings,
+                               'wheels': None if result.wheels is None else
+                               result.wheels.__dict__}
     if truth is not None:
         for name, p in (('odometry', result.odometry_poses), ('thesis', result.thesis_poses),
                         ('joint', result.joint_poses), ('unrefined', result.unrefined_poses),

@@ -27,7 +27,7 @@ from vbn_common.geometry.frames import quaternion_yaw, wrap_angle
 if TYPE_CHECKING:
     from visibility_builder.estimation.pipeline import EstimationSettings
 
-__all__ = ['odometry_steps', 'step_stds', 'straight_steps']
+__all__ = ['odometry_steps', 'read_track', 'step_stds', 'straight_steps']
 
 _LOG = logging.getLogger(__name__)
 _TYPES = ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/PoseStamped',
@@ -43,6 +43,36 @@ def straight_steps(poses: np.ndarray) -> np.ndarray:
     poses = np.asarray(poses, float)
     return np.stack([np.linalg.norm(np.diff(poses[:, :2], axis=0), axis=1),
                      np.abs(wrap_angle(np.diff(poses[:, 2])))], axis=1)
+
+
+def read_track(bag: str | os.PathLike[str], topic: str = names.ODOM) -> np.ndarray | None:
+    """Return the odometry stream ``(m, 4)`` ``(stamp_ns, x, y, yaw)`` in time order.
+
+    None (and a log line saying why) when the bag has no such stream, it cannot be read,
+    or it holds fewer than two samples.
+    """
+    samples: list[tuple[int, float, float, float]] = []
+    try:
+        with open_bag(bag) as reader:
+            if topic not in reader.topics or reader.topics[topic].msgtype not in _TYPES:
+                _LOG.info('%s: no odometry stream on %s; steps are the straight lines '
+                          'between images', bag, topic)
+                return None
+            for _, msgtype, bag_ns, raw in reader.messages(topics=[topic]):
+                msg = reader.deserialize(raw, msgtype)
+                pose = getattr(msg.pose, 'pose', msg.pose)
+                q = pose.orientation
+                stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
+                samples.append((stamp or bag_ns, float(pose.position.x),
+                                float(pose.position.y),
+                                float(quaternion_yaw((q.x, q.y, q.z, q.w)))))
+    except VbnCommonError as error:
+        _LOG.warning('%s: odometry stream unreadable (%s); steps are the straight lines '
+                     'between images', bag, error)
+        return None
+    if len(samples) < 2:
+        return None
+    return np.array(sorted(samples))
 
 
 def odometry_steps(bag: str | os.PathLike[str], stamps_ns: np.ndarray,
@@ -63,28 +93,9 @@ def odometry_steps(bag: str | os.PathLike[str], stamps_ns: np.ndarray,
     """
     straight = straight_steps(poses)
     stamps_ns = np.asarray(stamps_ns, np.int64)
-    samples: list[tuple[int, float, float, float]] = []
-    try:
-        with open_bag(bag) as reader:
-            if topic not in reader.topics or reader.topics[topic].msgtype not in _TYPES:
-                _LOG.info('%s: no odometry stream on %s; steps are the straight lines '
-                          'between images', bag, topic)
-                return straight
-            for _, msgtype, bag_ns, raw in reader.messages(topics=[topic]):
-                msg = reader.deserialize(raw, msgtype)
-                pose = getattr(msg.pose, 'pose', msg.pose)
-                q = pose.orientation
-                stamp = int(msg.header.stamp.sec) * 10**9 + int(msg.header.stamp.nanosec)
-                samples.append((stamp or bag_ns, float(pose.position.x),
-                                float(pose.position.y),
-                                float(quaternion_yaw((q.x, q.y, q.z, q.w)))))
-    except VbnCommonError as error:
-        _LOG.warning('%s: odometry stream unreadable (%s); steps are the straight lines '
-                     'between images', bag, error)
+    track = read_track(bag, topic)
+    if track is None:
         return straight
-    if len(samples) < 2:
-        return straight
-    track = np.array(sorted(samples))
     t = track[:, 0].astype(np.int64)
     step_len = np.linalg.norm(np.diff(track[:, 1:3], axis=0), axis=1)
     step_turn = np.abs(wrap_angle(np.diff(track[:, 3])))

@@ -21,6 +21,9 @@ Steps (each timed and counted in :class:`PoseEstimation`):
    fitted turns, carried into the world; the thesis's system, the linear joint system
    with the odometry's displacements between consecutive stations, and (planar) the
    robust non-linear fit of bearings and odometry that the linear fits seed.
+   After the first fit its headings calibrate the odometry's wheels (:mod:`.scale`:
+   the turns the images measured against the odometry's), and every later fit uses the
+   odometry integrated again with them: its distances, and so the estimate's scale.
 6. **Pairs, second pass**: the pairs of stations within ``radius_m`` of each other in
    that estimate that the first pass did not try (the exploration's other rows, a
    loop's return) and that lie in one piece of the view graph, measured and checked
@@ -66,6 +69,7 @@ from visibility_builder.estimation.global_fit import TILT_STD, fit_views
 from visibility_builder.estimation.linking import join_pieces, link_candidates, near_pairs
 from visibility_builder.estimation.odometry_path import (
     odometry_steps,
+    read_track,
     step_stds,
     straight_steps,
 )
@@ -76,11 +80,17 @@ from visibility_builder.estimation.refinement import (
     tracks_from_pairs,
 )
 from visibility_builder.estimation.rotations import matrix_to_quat, quat_yaw
+from visibility_builder.estimation.scale import (
+    WheelCalibration,
+    calibrate_wheels,
+    recalibrated_poses,
+    signed_motion,
+    turn_sigmas,
+)
 from visibility_builder.estimation.view_pairs import PairMotion, PairSettings, measure_pair
 
 __all__ = ['EstimationSettings', 'PoseEstimation', 'estimate_from_odometry', 'estimate_poses',
-           'check_known_distance', 'estimated_exploration', 'matrix_to_quat',
-           'scaled_to_distance']
+           'estimated_exploration', 'matrix_to_quat']
 
 _LOG = logging.getLogger(__name__)
 
@@ -110,6 +120,8 @@ class EstimationSettings:
             more is dropped.
         refine: Bundle-adjust the result (:mod:`.refinement`).
         refinement: Its settings.
+        wheel_calibration: Calibrate the odometry's wheels by the images' turns
+            (:mod:`.scale`); off for an odometry whose heading is not its wheels'.
         workers: Processes for the feature extraction (None: every core).
     """
 
@@ -129,6 +141,7 @@ class EstimationSettings:
     max_direction_error_deg: float = 10.0
     refine: bool = True
     refinement: RefinementSettings = RefinementSettings()
+    wheel_calibration: bool = True
     workers: int | None = None
 
     def __post_init__(self) -> None:
@@ -170,6 +183,8 @@ class PoseEstimation:
         refinement: The bundle adjustment's figures (None without it).
         warnings: What the estimate had to work round (a tilting camera).
         pieces: ``(n,)`` each image's piece of the view graph (0: the largest).
+        wheels: The odometry's calibration by the images' turns (None: no odometry
+            stream, or not asked for).
     """
 
     base_poses: np.ndarray
@@ -188,6 +203,7 @@ class PoseEstimation:
     refinement: RefinementResult | None = None
     warnings: list[str] = field(default_factory=list)
     pieces: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    wheels: WheelCalibration | None = None
 
 
 def _stations(odom: np.ndarray, tolerance: float) -> np.ndarray:
@@ -225,7 +241,8 @@ class _Progress:
 def estimate_poses(exploration: Exploration, settings: EstimationSettings = EstimationSettings(),
                    progress: Callable[[str, int, int], None] | None = None,
                    features: list[ImageFeatures] | None = None,
-                   steps: np.ndarray | None = None) -> PoseEstimation:
+                   steps: np.ndarray | None = None,
+                   track: np.ndarray | None = None) -> PoseEstimation:
     """Estimate every image's pose from the images and the odometry (module docstring).
 
     Args:
@@ -237,6 +254,8 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         steps: ``(n - 1, 2)`` the path driven (m) and turned (rad) between consecutive
             images (:func:`~.odometry_path.odometry_steps`); None: the straight lines
             between their odometry poses.
+        track: ``(m, 4)`` the odometry stream (:func:`~.odometry_path.read_track`) for
+            the wheels' calibration (None: none).
 
     Returns:
         The estimate (see :class:`PoseEstimation`).
@@ -356,8 +375,17 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         return refit('fit (final)')
 
     # Second pass: near in space in the first estimate.
+    fit = refit('fit (first)')
+    wheels = None
+    if track is not None and settings.wheel_calibration:
+        # The first fit's headings calibrate the wheels; every later fit uses them.
+        wheels = _calibrate(fit, track, exploration.stamps_ns(), steps)
+        if wheels.applied:
+            odom_base = recalibrated_poses(track, exploration.stamps_ns(), odom_base, wheels)
+            odom_cam = np.array([compose_poses(b, mount) for b in odom_base])
+            steps = steps * np.array([wheels.distance_scale, 1.0])
     step_std = step_stds(steps, settings)
-    fit = near_in_space(refit('fit (first)'))
+    fit = near_in_space(fit)
     # Pieces joined by the consensus of their pairs (.linking), then near in space again.
     for round_ in range(settings.link_rounds):
         pieces = fit['pieces']
@@ -402,7 +430,7 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
         base = np.array([compose_poses(c, invert_pose(mount)) for c in refined.camera_poses])
     return PoseEstimation(base, thesis, joint, unrefined, odom_base.copy(), station, pairs,
                           fit['kept_rotation'], fit['kept_direction'], tried, refused, times,
-                          fit['components'], refined, warnings, fit['pieces'])
+                          fit['components'], refined, warnings, fit['pieces'], wheels)
 
 
 #: A planar solver keeping less than this share of the matches the essential matrix keeps
@@ -469,56 +497,6 @@ def _disagrees(motion: PairMotion, predicted: np.ndarray, turn_std: float,
     return ''
 
 
-def check_known_distance(count: int, first: int, second: int, metres: float) -> None:
-    """Raise unless images ``first`` and ``second`` of ``count`` can be ``metres`` apart."""
-    if not (0 <= first < count and 0 <= second < count) or first == second:
-        raise VisibilityBuilderError(f'--known-distance: {count} images; two different ones '
-                                     f'are needed, got {first} and {second}')
-    if not (math.isfinite(metres) and metres > 0):
-        raise VisibilityBuilderError(f'--known-distance: the distance must be positive, got '
-                                     f'{metres}')
-
-
-def scaled_to_distance(result: PoseEstimation, first: int, second: int,
-                       metres: float) -> PoseEstimation:
-    """Return ``result`` scaled so that images ``first`` and ``second`` are ``metres`` apart.
-
-    The odometry sets an estimate's scale, and a wheel's scale error is one the images
-    cannot see (monocular views measure no length): on the room at three times the
-    default drift the odometry's path came out 0.14 % short and so did the estimate,
-    0.23 cm median of error of which 0.03 cm remain after a similarity alignment. A
-    distance the user measured between two places of the exploration (the thesis's
-    "known distance" where there is no odometry) fixes it: every estimated position is
-    scaled about the first image's (which stays the ``map`` origin's pose), the headings
-    are unchanged (a similarity keeps every bearing and reprojection).
-
-    Raises:
-        VisibilityBuilderError: an image index out of range, the same image twice, a
-            distance that is not positive, or images without an estimate or at one
-            place.
-    """
-    check_known_distance(len(result.base_poses), first, second, metres)
-    base = result.base_poses
-    if not (np.isfinite(base[first]).all() and np.isfinite(base[second]).all()):
-        raise VisibilityBuilderError(f'image {first} or {second} has no estimated pose')
-    estimated = float(np.linalg.norm(base[second, :2] - base[first, :2]))
-    if estimated < 1e-6:
-        raise VisibilityBuilderError(f'images {first} and {second} were estimated at one '
-                                     'place: they cannot give the scale')
-    factor = metres / estimated
-    origin = base[0, :2].copy()
-
-    def scale(poses: np.ndarray) -> np.ndarray:
-        out = np.array(poses, float, copy=True)
-        out[:, :2] = origin + factor * (out[:, :2] - origin)
-        return out
-
-    return replace(result, base_poses=scale(result.base_poses),
-                   thesis_poses=scale(result.thesis_poses),
-                   joint_poses=scale(result.joint_poses),
-                   unrefined_poses=scale(result.unrefined_poses))
-
-
 def estimated_exploration(exploration: Exploration, result: PoseEstimation) -> Exploration:
     """Return ``exploration`` with each frame posed by ``result`` (unposed frames dropped).
 
@@ -559,8 +537,24 @@ def estimate_from_odometry(bag: str | os.PathLike[str], read: ReadConfig,
     _LOG.warning('%s has no poses of its images: estimating them from the images and the '
                  'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
     steps = odometry_steps(bag, odometry.stamps_ns(), odometry.base_poses())
-    result = estimate_poses(odometry, EstimationSettings(workers=workers), steps=steps)
+    result = estimate_poses(odometry, EstimationSettings(workers=workers), steps=steps,
+                            track=read_track(bag))
+    if result.wheels is not None:
+        _LOG.info('%s', result.wheels.line())
     return estimated_exploration(odometry, result)
+
+
+def _calibrate(fit: dict, track: np.ndarray, stamps_ns: np.ndarray,
+               steps: np.ndarray) -> WheelCalibration:
+    """Calibrate the wheels by the fit's headings over segments inside its largest piece."""
+    camera, pieces = np.asarray(fit['camera'], float), np.asarray(fit['pieces'])
+    usable = (pieces[:-1] == pieces[1:]) & np.isfinite(camera).all(axis=1)[:-1] & \
+        np.isfinite(camera).all(axis=1)[1:]
+    wheels = calibrate_wheels(camera[:, 2], signed_motion(track, stamps_ns), usable,
+                              turn_sigmas(steps))
+    if not wheels.applied:
+        _LOG.warning('%s', wheels.line())
+    return wheels
 
 
 def _refine(fit: dict[str, object], pairs: list[PairMotion], features: list[ImageFeatures],
