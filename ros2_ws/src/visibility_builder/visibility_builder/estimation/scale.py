@@ -52,8 +52,10 @@ __all__ = ['MAX_TURN_ERROR', 'WheelCalibration', 'calibrate_wheels', 'check_know
 
 #: Turns of the odometry more than this share off the images' are not a wheel's error.
 MAX_TURN_ERROR = 0.05
-#: The calibration is used when its scale's standard deviation is at most this.
+#: The calibration is used when its scale's standard deviation is at most this, or when
+#: the correction it makes is at least :data:`SIGNIFICANT` of them (the wheels measurably off).
 MAX_SCALE_STD = 0.0025
+SIGNIFICANT = 3.0
 #: ... and the segments used turn at least this much in all, radians.
 MIN_TURNED_RAD = 2.0 * math.pi
 #: Segments whose turn misses the fit by more than this many robust deviations are left out.
@@ -190,9 +192,9 @@ def calibrate_wheels(image_yaw: np.ndarray, motion: np.ndarray, usable: np.ndarr
     if keep.sum() < 10 or turned < MIN_TURNED_RAD:
         note = (f'the images turn {math.degrees(turned):.0f} deg over {int(keep.sum())} '
                 f'segments, at least {math.degrees(MIN_TURNED_RAD):.0f} deg over 10 needed')
-    elif std > MAX_SCALE_STD:
-        note = (f'the turns give the scale to {100 * std:.2f} %, no better than '
-                f'{100 * MAX_SCALE_STD:.2f} % needed')
+    elif std > MAX_SCALE_STD and abs(p - 1.0) < SIGNIFICANT * std:
+        note = (f'the turns give the scale to {100 * std:.2f} %, and its correction is '
+                f'within {SIGNIFICANT:g} of that')
     elif abs(p - 1.0) > MAX_TURN_ERROR:
         note = (f"the odometry's turns are {100 * (1 / p - 1):+.1f} % off the images': more "
                 "than a wheel's error (a gyro's heading, a wrong wheel base?); its "
