@@ -183,6 +183,9 @@ def test_bench_estimate_table_and_summary(tmp_path, capsys) -> None:
     assert len(rows) == 1 and rows[0]['drift'] == 2.0 and 'localize' not in rows[0]
     assert code == (0 if rows[0]['pass'] else 1)
     assert '| room | panoramic | 2 | 0 |' in printed and 'targets:' in printed
+    wheels = rows[0]['wheels']
+    shown = f"x {wheels['distance_scale']:.4f} +- {100 * wheels['distance_scale_std']:.3f} %"
+    assert f"| {shown if wheels['applied'] else f'no ({shown})'} |" in printed
     assert rows[0]['result']['position_median'] < rows[0]['odometry']['position_median']
     assert vbn_main(['bench-estimate', '--out', str(out), '--drifts', 'x']) != 0
     assert 'numbers' in capsys.readouterr().err

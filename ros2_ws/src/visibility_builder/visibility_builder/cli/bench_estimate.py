@@ -10,7 +10,8 @@ For each scene, drift and seed: renders a driven exploration (``vbn render --kin
 exploration --odometry``, kept in ``OUT/bags``), estimates its poses (``vbn
 estimate-poses --frame truth``) and prints the odometry's, the thesis's and the refined
 errors after an SE(2) alignment with the targets of point 5 (median 1 cm, max 5 cm,
-heading median 0.2 deg) and the scale error left (the odometry's). For the panoramic room
+heading median 0.2 deg), the wheels' calibration by the images' turns and the scale error
+left (the calibrated odometry's). For the panoramic room
 it then builds databases from the estimated poses, from the estimated poses scaled by a
 known distance (``--known-distance``: the two images farthest apart, their true distance
 to the millimetre, as a user measures it) and from the same bag's ground truth, and
@@ -98,9 +99,9 @@ def run(args: argparse.Namespace) -> int:
                     rows.append(_one(out, scene, camera, drift, seed, args))
     lines = ['| scene | camera | drift | seed | odometry median / max | thesis median / max | '
              'refined median / max, heading | pieces (the largest alone: images, median / '
-             'max) | scale error | estimate time | room_run, DB of estimated poses: median / '
-             'p95 (ratio) | ... scaled by a known distance | DB of true poses |',
-             '|' + '---|' * 13]
+             'max) | wheels calibrated | scale error | estimate time | room_run, DB of estimated '
+             'poses: median / p95 (ratio) | ... scaled by a known distance | DB of true poses |',
+             '|' + '---|' * 14]
     passed = True
     for r in rows:
         odo, thesis, res = r['odometry'], r['thesis'], r['result']
@@ -118,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
             f"{100 * odo['position_median']:.2f} / {100 * odo['position_max']:.1f} cm | "
             f"{100 * thesis['position_median']:.2f} / {100 * thesis['position_max']:.2f} cm | "
             f"{100 * res['position_median']:.2f} / {100 * res['position_max']:.2f} cm, "
-            f"{res['heading_median_deg']:.3f} deg | {_pieces(r)} | "
+            f"{res['heading_median_deg']:.3f} deg | {_pieces(r)} | {_wheels(r)} | "
             f"{100 * (r.get('result_scale', float('nan')) - 1):+.3f} % | "
             f"{sum(r['times'].values()):.0f} s | {db('estimated')} | {db('known')} | "
             f"{db('truth')} |")
@@ -135,10 +136,22 @@ def run(args: argparse.Namespace) -> int:
           f"{TARGETS['localize_ratio']:g} x the ground truth's median and p95: "
           + ('PASS' if passed else 'FAIL'))
     print('scale error: the similarity scale that maps the refined positions onto the truth, '
-          'minus one (the odometry sets it; a known distance between the two images '
-          'farthest apart, to the millimetre, replaces it in the last database)')
+          "minus one (the odometry sets it, its wheels calibrated by the images' turns: "
+          'their distances times p, with its standard deviation; a known distance between '
+          'the two images farthest apart, to the millimetre, replaces it in the last '
+          'database)')
     write_text_atomic(out / 'summary.json', json.dumps(rows, indent=2, default=float))
     return 0 if passed else 1
+
+
+def _wheels(row: dict[str, Any]) -> str:
+    """Return the wheels' calibration (``estimation/scale.py``): x p +- std, or why not."""
+    wheels = row.get('wheels')
+    if not wheels:
+        return '-'
+    figure = (f"x {wheels['distance_scale']:.4f} +- {100 * wheels['distance_scale_std']:.3f} "
+              '%')
+    return figure if wheels['applied'] else f'no ({figure})'
 
 
 def _pieces(row: dict[str, Any]) -> str:
