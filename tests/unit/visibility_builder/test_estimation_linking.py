@@ -199,3 +199,52 @@ def test_the_odometry_path_between_images_counts_the_detour(tmp_path: Path) -> N
     # Without the stream: the straight lines.
     empty = write_bag(tmp_path / 'none', [('/other', POSE, T0, pose(T0, 0.0, 0.0, 0.0))])
     np.testing.assert_allclose(odometry_steps(empty, stamps, ends), straight_steps(ends))
+
+
+def test_most_pairs_beyond_the_bound_overrule_it_when_the_views_at_one_place_confirm() -> None:
+    """The odometry's bound too tight for the truth (three times its drift): the images win.
+
+    Room B's views stand between room A's (0.35 m from the nearest), so the true
+    correction puts views at one place, and only views that match there confirm it.
+    """
+    import functools
+
+    from visibility_builder.estimation import linking
+
+    xy = np.array([(x, y) for x in range(3) for y in range(3)], float) * 0.5
+    rng = np.random.default_rng(5)
+    truth = np.concatenate([np.c_[xy, rng.uniform(-3, 3, 9)],
+                            np.c_[xy + 0.25, rng.uniform(-3, 3, 9)]])
+    pieces = np.repeat([0, 1], 9)
+    estimate = truth.copy()
+    estimate[9:] = _rigid(truth[9:], math.radians(6.0), np.array([1.2, -0.6]))
+    pairs = [_pair(i, j, truth) for i in range(9) for j in range(9, 18)]
+    tight = LinkBound(math.radians(2.0), 0.3, estimate[9:, :2])
+    asked: list[tuple[int, int]] = []
+
+    def check(turn_error: float):
+        def probe(which):
+            asked.extend(which)
+            return [_pair(i, j, truth, turn_error=turn_error) for i, j in which]
+        return functools.partial(linking._contradicted, estimate, pieces == 0, pieces == 1,
+                                 probe=probe, field_deg=360.0)
+
+    # Without views to confirm it, the bound stands.
+    assert consensus(estimate, pieces == 0, pairs, np.random.default_rng(0), bound=tight) is None
+    link = consensus(estimate, pieces == 0, pairs, np.random.default_rng(0), bound=tight,
+                     check=check(0.0))
+    assert link is not None and len(link.inliers) == len(pairs)
+    assert not tight.allows(link.rotation, link.translation)
+    corrected = _rigid(estimate[9:], link.rotation, link.translation)
+    assert np.abs(corrected[:, :2] - truth[9:, :2]).max() < 1e-6
+    assert len(asked) >= 3 and all(np.linalg.norm(truth[i, :2] - truth[j, :2]) < 0.4
+                                   for i, j in asked)
+    # Views at one place that turn otherwise refuse it.
+    assert consensus(estimate, pieces == 0, pairs, np.random.default_rng(0), bound=tight,
+                     check=check(0.3)) is None
+    # Fewer than most pairs beyond the bound: the bound stands.
+    few = pairs[:30] + [_pair(i, j, truth, bearing_error=1.0 + 0.05 * k)
+                        for k, (i, j) in enumerate((i, j) for i in range(9)
+                                                   for j in range(9, 18))][30:]
+    assert consensus(estimate, pieces == 0, few, np.random.default_rng(0), bound=tight,
+                     check=check(0.0)) is None
