@@ -70,9 +70,7 @@ def _is_worker(pid: int) -> bool:
     return b'spawn_main' in cmdline and b'resource_tracker' not in cmdline
 
 
-def _workers_started(proc: subprocess.Popen, count: int, timeout: float = 240) -> set[int]:
-    # A safety deadline, not a timing: on one busy core two spawned workers importing
-    # OpenCV took more than a minute to appear.
+def _workers_started(proc: subprocess.Popen, count: int, timeout: float = 60) -> set[int]:
     deadline = time.monotonic() + timeout
     while len({k for k in _alive(_children(proc.pid)) if _is_worker(k)}) < count:
         assert proc.poll() is None and time.monotonic() < deadline
