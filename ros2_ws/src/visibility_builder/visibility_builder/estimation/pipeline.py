@@ -379,10 +379,11 @@ def estimate_poses(exploration: Exploration, settings: EstimationSettings = Esti
     wheels = None
     if track is not None and settings.wheel_calibration:
         # The first fit's headings calibrate the wheels; every later fit uses them.
-        wheels = _calibrate(fit, track, exploration.stamps_ns(), steps)
+        stamps = exploration.stamps_ns()
+        wheels = _calibrate(fit, track, stamps, steps)
         if wheels.applied:
-            odom_base = recalibrated_poses(track, exploration.stamps_ns(), odom_base, wheels)
-            odom_cam = np.array([compose_poses(b, mount) for b in odom_base])
+            odom_base = recalibrated_poses(track, stamps, odom_base, wheels)
+            odom_cam = compose_poses(odom_base, mount)
             steps = steps * np.array([wheels.distance_scale, 1.0])
     step_std = step_stds(steps, settings)
     fit = near_in_space(fit)

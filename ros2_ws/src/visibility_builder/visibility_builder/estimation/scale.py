@@ -234,12 +234,11 @@ def recalibrated_poses(track: np.ndarray, stamps_ns: np.ndarray, poses: np.ndarr
     new_track = np.stack([x, y, wrap_angle(yaw)], axis=1)
     at = _sample_at(track, stamps_ns)
     out = poses.copy()
-    for i, k in enumerate(at):
-        if k >= 0:
-            offset = compose_poses(invert_pose(track[k, 1:]), poses[i])
-            out[i] = compose_poses(new_track[k], offset)
+    ok = at >= 0
+    offset = compose_poses(invert_pose(track[at[ok], 1:]), poses[ok])
+    out[ok] = compose_poses(new_track[at[ok]], offset)
     move = compose_poses(poses[0], invert_pose(out[0]))     # the first image stays put
-    return np.array([compose_poses(move, pose) for pose in out]).reshape(-1, 3)
+    return compose_poses(move, out).reshape(-1, 3)
 
 
 def check_known_distance(count: int, first: int, second: int, metres: float) -> None:
