@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from vbn_common.exploration import ReadConfig, read_exploration
     from visibility_builder.errors import VisibilityBuilderError
     from visibility_builder.estimation.accuracy import align_se2, pose_errors, similarity_scale
-    from visibility_builder.estimation.odometry_path import odometry_steps, read_track
+    from visibility_builder.estimation.odometry_path import read_track, track_steps
     from visibility_builder.estimation.pipeline import EstimationSettings, estimate_poses
     from visibility_builder.estimation.pose_bag import write_estimated_bag
     from visibility_builder.estimation.scale import check_known_distance, scaled_to_distance
@@ -117,9 +117,9 @@ def run(args: argparse.Namespace) -> int:
     if args.radius is not None:
         settings = replace(settings, radius_m=args.radius)
     progress = None if args.quiet or not sys.stderr.isatty() else _progress
-    steps = odometry_steps(args.bag, exploration.stamps_ns(), exploration.base_poses())
-    result = estimate_poses(exploration, settings, progress, steps=steps,
-                            track=read_track(args.bag))
+    track = read_track(args.bag)          # the odometry stream, read once
+    steps = track_steps(track, exploration.stamps_ns(), exploration.base_poses())
+    result = estimate_poses(exploration, settings, progress, steps=steps, track=track)
     if progress is not None:
         print(file=sys.stderr)
     if known is not None:

@@ -27,7 +27,8 @@ from vbn_common.geometry.frames import quaternion_yaw, wrap_angle
 if TYPE_CHECKING:
     from visibility_builder.estimation.pipeline import EstimationSettings
 
-__all__ = ['odometry_steps', 'read_track', 'step_stds', 'straight_steps']
+__all__ = ['odometry_steps', 'read_track', 'samples_at', 'step_stds', 'straight_steps',
+           'track_steps']
 
 _LOG = logging.getLogger(__name__)
 _TYPES = ('nav_msgs/msg/Odometry', 'geometry_msgs/msg/PoseStamped',
@@ -91,20 +92,29 @@ def odometry_steps(bag: str | os.PathLike[str], stamps_ns: np.ndarray,
         poses: ``(n, 3)`` the images' odometry poses ``(x, y, yaw)`` of ``base_link``.
         topic: The odometry topic.
     """
+    return track_steps(read_track(bag, topic), stamps_ns, poses)
+
+
+def samples_at(track: np.ndarray, stamps_ns: np.ndarray) -> np.ndarray:
+    """Return the index of the last sample of ``track`` at or before each stamp (-1: none)."""
+    return np.searchsorted(track[:, 0].astype(np.int64), np.asarray(stamps_ns, np.int64),
+                           side='right') - 1
+
+
+def track_steps(track: np.ndarray | None, stamps_ns: np.ndarray,
+                poses: np.ndarray) -> np.ndarray:
+    """Return :func:`odometry_steps` from a stream already read (:func:`read_track`)."""
     straight = straight_steps(poses)
-    stamps_ns = np.asarray(stamps_ns, np.int64)
-    track = read_track(bag, topic)
     if track is None:
         return straight
-    t = track[:, 0].astype(np.int64)
     step_len = np.linalg.norm(np.diff(track[:, 1:3], axis=0), axis=1)
     step_turn = np.abs(wrap_angle(np.diff(track[:, 3])))
     cum_len = np.concatenate([[0.0], np.cumsum(step_len)])
     cum_turn = np.concatenate([[0.0], np.cumsum(step_turn)])
     # Sample index at or before each image stamp; the path between two images is the
     # cumulative difference of the samples inside their interval.
-    at = np.searchsorted(t, stamps_ns, side='right') - 1
-    inside = np.clip(at, 0, len(t) - 1)
+    at = samples_at(track, stamps_ns)
+    inside = np.clip(at, 0, len(track) - 1)
     path = np.stack([np.diff(cum_len[inside]), np.diff(cum_turn[inside])], axis=1)
     path[(at[1:] < 0) | (at[:-1] < 0)] = 0.0
     return np.maximum(path, straight)

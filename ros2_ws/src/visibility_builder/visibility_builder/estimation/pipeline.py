@@ -68,10 +68,10 @@ from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.estimation.global_fit import TILT_STD, fit_views
 from visibility_builder.estimation.linking import join_pieces, link_candidates, near_pairs
 from visibility_builder.estimation.odometry_path import (
-    odometry_steps,
     read_track,
     step_stds,
     straight_steps,
+    track_steps,
 )
 from visibility_builder.estimation.refinement import (
     RefinementResult,
@@ -537,9 +537,10 @@ def estimate_from_odometry(bag: str | os.PathLike[str], read: ReadConfig,
                                      'estimate them from') from None
     _LOG.warning('%s has no poses of its images: estimating them from the images and the '
                  'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
-    steps = odometry_steps(bag, odometry.stamps_ns(), odometry.base_poses())
+    track = read_track(bag)
+    steps = track_steps(track, odometry.stamps_ns(), odometry.base_poses())
     result = estimate_poses(odometry, EstimationSettings(workers=workers), steps=steps,
-                            track=read_track(bag))
+                            track=track)
     if result.wheels is not None:
         _LOG.info('%s', result.wheels.line())
     return estimated_exploration(odometry, result)

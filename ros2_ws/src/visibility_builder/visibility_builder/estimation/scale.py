@@ -43,6 +43,7 @@ import numpy as np
 
 from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
+from visibility_builder.estimation.odometry_path import samples_at
 
 if TYPE_CHECKING:
     from visibility_builder.estimation.pipeline import PoseEstimation
@@ -110,12 +111,6 @@ def _signed_increments(track: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
     return forward, turn, mid
 
 
-def _sample_at(track: np.ndarray, stamps_ns: np.ndarray) -> np.ndarray:
-    """Return the index of the last odometry sample at or before each stamp (-1: none)."""
-    times = track[:, 0].astype(np.int64)
-    return np.searchsorted(times, np.asarray(stamps_ns, np.int64), side='right') - 1
-
-
 def signed_motion(track: np.ndarray, stamps_ns: np.ndarray) -> np.ndarray:
     """Return ``(n - 1, 2)`` the odometry's signed distance (m) and turn (rad) between images.
 
@@ -128,7 +123,7 @@ def signed_motion(track: np.ndarray, stamps_ns: np.ndarray) -> np.ndarray:
     forward, turn, _ = _signed_increments(track)
     cum = np.stack([np.concatenate([[0.0], np.cumsum(forward)]),
                     np.concatenate([[0.0], np.cumsum(turn)])], axis=1)
-    at = _sample_at(track, stamps_ns)
+    at = samples_at(track, stamps_ns)
     out = np.diff(cum[np.clip(at, 0, None)], axis=0)
     out[(at[1:] < 0) | (at[:-1] < 0)] = np.nan
     return out
@@ -232,7 +227,7 @@ def recalibrated_poses(track: np.ndarray, stamps_ns: np.ndarray, poses: np.ndarr
     x = track[0, 1] + np.concatenate([[0.0], np.cumsum(new_forward * chord * np.cos(mid))])
     y = track[0, 2] + np.concatenate([[0.0], np.cumsum(new_forward * chord * np.sin(mid))])
     new_track = np.stack([x, y, wrap_angle(yaw)], axis=1)
-    at = _sample_at(track, stamps_ns)
+    at = samples_at(track, stamps_ns)
     out = poses.copy()
     ok = at >= 0
     offset = compose_poses(invert_pose(track[at[ok], 1:]), poses[ok])
