@@ -282,20 +282,21 @@ def _residuals_and_jacobian(state: np.ndarray, rays: np.ndarray, points: np.ndar
     d_ry = np.array([[-sp, 0.0, cp], [0.0, 0.0, 0.0], [-cp, 0.0, -sp]])
     d_rx = np.array([[0.0, 0.0, 0.0], [0.0, -sr, -cr], [0.0, cr, -sr]])
     turned = rays @ (ry @ rx).T
-    dx, dy, dzp = points[:, 0] - x, points[:, 1] - y, points[:, 2] - dz
     c, s = math.cos(yaw), math.sin(yaw)
-    v = np.column_stack([c * dx + s * dy, -s * dx + c * dy, dzp])
-    norm = np.maximum(np.linalg.norm(v, axis=1), 1e-12)
+    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])   # map -> base
+    v = (points - np.array([x, y, dz])) @ rotation.T
+    norm = np.sqrt(np.maximum(np.einsum('ij,ij->i', v, v), 1e-24))
     u = v / norm[:, None]
+    # d(-u)/d(state) = -(I - u u^T) / |v| dv/d(state), with dv/dx, dv/dy, dv/ddz the
+    # constant columns of -rotation and dv/dyaw = (v_y, -v_x, 0).
+    dv = np.empty((len(points), 3, 4))
+    dv[:, :, 0] = -rotation[:, 0]
+    dv[:, :, 1] = -rotation[:, 1]
+    dv[:, 0, 2], dv[:, 1, 2], dv[:, 2, 2] = v[:, 1], -v[:, 0], 0.0
+    dv[:, :, 3] = -rotation[:, 2]
+    along = np.einsum('ni,nik->nk', u, dv)
     jac = np.empty((len(points), 3, 6))
-    # d(-u)/d(state) = -(I - u u^T) / |v| dv/d(state), dv/dx, dv/dy, dv/dyaw, dv/ddz:
-    zero, one = np.zeros(len(points)), np.ones(len(points))
-    dv = np.stack([np.column_stack([-c * one, s * one, zero]),
-                   np.column_stack([-s * one, -c * one, zero]),
-                   np.column_stack([v[:, 1], -v[:, 0], zero]),
-                   np.column_stack([zero, zero, -one])], axis=2)          # (n, 3, 4)
-    projected = dv - u[:, :, None] * np.einsum('ni,nik->nk', u, dv)[:, None, :]
-    jac[:, :, [0, 1, 2, 5]] = -projected / norm[:, None, None]
+    jac[:, :, [0, 1, 2, 5]] = (u[:, :, None] * along[:, None, :] - dv) / norm[:, None, None]
     jac[:, :, 3] = rays @ (d_ry @ rx).T
     jac[:, :, 4] = rays @ (ry @ d_rx).T
     return turned - u, jac
