@@ -92,3 +92,60 @@ def test_condition_names_parse_and_pitch2_brings_its_reference() -> None:
     assert floor.exploration == tuple(lens_render_argv('pinhole', 'exploration', 'floor'))
     assert floor.exploration[:3] == ('render', '--scene', 'floor')
     assert CONDITIONS['hires'].run[-4:] == ('--width', '1280', '--height', '960')
+
+
+def test_runs_at_more_seeds_are_summed_up_per_run_and_each_carries_the_targets() -> None:
+    """--seeds: the median of the runs' medians, the worst p95 and error, the peer beside."""
+    def with_max(fig: dict, largest: float, heading: float) -> dict:
+        fig['evo'].update(translation_max_m=largest, heading_median_deg=heading)
+        return fig
+
+    runs = {'room_run': with_max(figures(1.0, 0.0006, 0.0025, 0.011, 0.1), 0.008, 0.012),
+            'room_run@s11': with_max(figures(0.99, 0.0008, 0.0041, 0.011, 0.1), 0.012, 0.014),
+            'room_run@s12': with_max(figures(1.0, 0.0007, 0.0029, 0.011, 0.1), 0.02, 0.013),
+            'room_run_effects': figures(1.0, 0.0007, 0.003, 0.011, 0.1)}
+    for name in ('room_run', 'room_run@s11', 'room_run@s12'):
+        runs[f'peer_tracking_{name}'] = with_max(
+            figures(1.0, 0.0004, 0.001, 0.1, 0.1, peer={'mode': 'tracking',
+                                                          'compact_bytes': 4 * 10**6}),
+            0.002, 0.005)
+    text, passed = report(runs)
+    assert not passed
+    assert ('| room_run, ours | base, 11, 12 | 0.070 cm | 0.410 cm | 2.00 cm | 0.0130 deg '
+            '| 99.0 % |') in text
+    assert ('| room_run, peer tracking | base, 11, 12 | 0.040 cm | 0.100 cm | 0.20 cm | '
+            '0.0050 deg | 100.0 % |') in text
+    assert 'room_run_effects, ours' not in text     # one run: nothing to sum up
+    # Every seed has its own rows against the accuracy issue's targets.
+    assert '| room_run@s11 translation p95 (evo, issue 16), m | 0.0041 | <= 0.003 | FAIL |' \
+        in text
+    assert '| room_run@s12 translation p95 (evo, issue 16), m | 0.0029 | <= 0.003 | PASS |' \
+        in text
+
+
+def test_seed_runs_render_the_run_they_repeat_with_the_seed() -> None:
+    import pytest
+
+    from landmark_localizer.bench.conditions import lens_render_argv
+    from landmark_localizer.bench.seeds import (
+        family_of,
+        parse_seeds,
+        seed_bag_name,
+        seed_render_argv,
+        seed_run_name,
+    )
+    from landmark_localizer.errors import LocalizerError
+
+    assert parse_seeds('') == [] and parse_seeds('3,11') == [3, 11]
+    for bad in ('3,x', '-1', '4,4'):
+        with pytest.raises(LocalizerError, match='--seeds'):
+            parse_seeds(bad)
+    argv = seed_render_argv('room_run_effects', 7)
+    assert argv[:2] == ['render', '--scene'] and argv[-4:] == ['--seed', '7', '--path-seed', '7']
+    assert {'--blur', '--noise', '--exposure'} <= set(argv)
+    assert seed_render_argv('room_run_pinhole', 7)[:-4] == lens_render_argv('pinhole', 'run')
+    assert 'run-kidnapped' in seed_render_argv('room_run_kidnapped', 7)
+    assert seed_bag_name('room_run_fisheye', 7) == 'room_run_fisheye_lens_s7'
+    assert family_of(seed_run_name('room_run_kidnapped', 7)) == ('room_run_kidnapped', 7)
+    with pytest.raises(LocalizerError, match='no run family'):
+        seed_render_argv('floor_run', 7)

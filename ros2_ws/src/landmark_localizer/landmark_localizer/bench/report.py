@@ -16,6 +16,7 @@ from typing import Any
 
 from landmark_localizer.bench.conditions import CONDITIONS, condition_targets, lens_targets
 from landmark_localizer.bench.peer_report import peer_table, peer_targets
+from landmark_localizer.bench.seeds import seeds_table
 
 __all__ = ['report']
 
@@ -156,6 +157,7 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
         lines += _floor_report(floor)
     lines += _ratios(runs)
     lines += peer_table(runs)
+    lines += seeds_table(runs)
     lines.append('')
     lines.append('RESULT: ' + ('PASS (every target met)' if passed else 'FAIL (see FAIL rows)'))
     return '\n'.join(lines), passed

@@ -22,6 +22,9 @@ starts from a fresh process with ``OPENBLAS_NUM_THREADS=1``:
   missing, their databases built into ``--out``), checked against the real-cameras
   issue's targets (95 % posed, median 2 cm, p95 8 cm, heading median 0.5 deg, no pose
   50 cm off; the pinhole's TRACKING p95 on one core at most 12 ms);
+- with ``--seeds S,...``: each room run above (and each lens run) again at every seed
+  (:mod:`landmark_localizer.bench.seeds`: rendered into ``--cache`` if missing, on the
+  same database, the peer beside it), each against the targets and summed up per run;
 - with ``--conditions NAME,...`` (or ``all``): the real-cameras issue's other rows
   (:mod:`landmark_localizer.bench.conditions`: a panorama pitched 2 degrees against the
   level one, a run shaking 0.5 degrees, a run camera 5 cm higher, a 1280 x 960 pinhole
@@ -97,6 +100,10 @@ def register(subparsers: Any) -> None:
                              'height, hires, floor_pinhole, floor_fisheye, comma separated, '
                              'or all (rendered into --cache if missing; each floor one takes '
                              'half an hour or more and 16 GB to render and build)')
+    parser.add_argument('--seeds', default='', metavar='SEED,...',
+                        help='also every room run (and lens run) rendered again with each of '
+                             'these seeds (odometry noise, image effects, path), comma '
+                             'separated (rendered into --cache if missing)')
     parser.add_argument('--set', dest='settings', action='append', default=[],
                         metavar='NAME=VALUE', help='localizer setting (repeatable)')
     parser.set_defaults(func=run)
@@ -167,7 +174,10 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(exist_ok=True)
     log = out / 'bench.log'
     bags, cache = Path(args.bags), Path(args.cache)
+    from landmark_localizer.bench.seeds import parse_seeds
+
     cameras, conditions = _cameras(args.cameras), _conditions(args.conditions)  # typos first
+    seeds = parse_seeds(args.seeds)
     room_db = _database(Path(args.room_db) if args.room_db else out / 'room.db',
                         bags / 'room_exploration', args.build_set, log)
     effects = cache / 'room_run_effects'
@@ -181,6 +191,7 @@ def run(args: argparse.Namespace) -> int:
     runs['room_run_effects'] = _localize('room_run_effects', room_db, effects, out, log, args)
     for camera in cameras:
         runs[f'room_run_{camera}'] = _lens_run(camera, cache, out, log, args)
+    _seed_runs(runs, seeds, cameras, cache, out, log, args)
     for name in conditions:
         runs[f'cond_{name}'] = _condition_run(name, room_db, cache, out, log, args)
     floor_db = None
@@ -225,6 +236,8 @@ def _peer_runs(runs: dict[str, dict[str, Any]], out: Path, log: Path,
     Both variants on ``room_run``, the tracking one (what a user would run on a robot)
     on the kidnapped, effects and lens runs and on the first frames of the floor run.
     """
+    from landmark_localizer.bench.seeds import family_of
+
     room = bags / 'room_exploration'
     plan: list[tuple[str, Path, Path, str, int | None]] = [
         ('room_run', room, bags / 'room_run', 'global', None),
@@ -234,6 +247,13 @@ def _peer_runs(runs: dict[str, dict[str, Any]], out: Path, log: Path,
     for camera in cameras:
         plan.append((f'room_run_{camera}', cache / f'room_exploration_{camera}_lens',
                      cache / f'room_run_{camera}_lens', 'tracking', None))
+    for name, fig in list(runs.items()):
+        family, seed = family_of(name)
+        if seed is not None:
+            camera = family[len('room_run_'):]
+            exploration = cache / f'room_exploration_{camera}_lens' if camera in cameras \
+                else room
+            plan.append((name, exploration, Path(fig['bag']), 'tracking', None))
     if floor_db is not None and 'floor_run_first' in runs:
         plan.append(('floor_run_first', cache / 'floor_exploration', cache / 'floor_run',
                      'tracking', runs['floor_run_first']['frames']))
@@ -241,6 +261,25 @@ def _peer_runs(runs: dict[str, dict[str, Any]], out: Path, log: Path,
         db = Path(runs[name]['db'])
         runs[f'peer_{mode}_{name}'] = _localize(f'peer_{mode}_{name}', db, bag, out, log,
                                                 args, limit=limit, peer=(exploration, mode))
+
+
+def _seed_runs(runs: dict[str, dict[str, Any]], seeds: list[int], cameras: list[str],
+               cache: Path, out: Path, log: Path, args: argparse.Namespace) -> None:
+    """Add every room run (and lens run) at each seed, on its run's database."""
+    from landmark_localizer.bench.seeds import (
+        SEED_FAMILIES,
+        seed_bag_name,
+        seed_render_argv,
+        seed_run_name,
+    )
+
+    families = [*SEED_FAMILIES, *(f'room_run_{camera}' for camera in cameras)]
+    for seed in seeds:
+        for family in families:
+            bag = _rendered(cache / seed_bag_name(family, seed),
+                            seed_render_argv(family, seed), log)
+            name = seed_run_name(family, seed)
+            runs[name] = _localize(name, Path(runs[family]['db']), bag, out, log, args)
 
 
 def _cameras(text: str) -> list[str]:
