@@ -39,6 +39,7 @@ from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.frames import Estimate, Frame, Stats, exposed
 from landmark_localizer.health import RegionHealth
+from landmark_localizer.ids import IdTable
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.map_search import MapSearch
 from landmark_localizer.points_refinement import motion_prior, refine_on_points
@@ -86,6 +87,7 @@ class Localizer:
                                   if k in SiftConfig.__dataclass_fields__})
         self.detector = self.sift.create()
         self.tracker = Tracker(self.index, config, self.detector)
+        self._ids = IdTable(self.index.n_classes)  # class-id set operations of a frame
         self.map_search = MapSearch(self.index, config)
         self.predictor = MotionPredictor()
         self.bridge = OdometryBridge()
@@ -360,11 +362,12 @@ class Localizer:
         predicted = self._predicted_camera(frame)
         incoming = self.index.regions[self._handover].features if self._handover >= 0 \
             else np.zeros(0, np.int64)
-        tracks = tracks.subset(np.isin(tracks.class_ids, region.features)
-                               | np.isin(tracks.class_ids, incoming))
+        ids = self._ids
+        tracks = tracks.subset(ids.member(tracks.class_ids, region.features)
+                               | ids.member(tracks.class_ids, incoming))
         if predicted is not None:
             tracks = self._redetect(image, tracks, region, predicted)
-        if np.isin(tracks.class_ids, region.features).sum() < config.min_tracked:
+        if ids.member(tracks.class_ids, region.features).sum() < config.min_tracked:
             return None, len(tracks), True
         solution = None
         if predicted is not None:
@@ -397,8 +400,8 @@ class Localizer:
                 self._probe_landmark(image, region, solution.estimate.pose)
         # Keep the inliers, and the incoming region's features no model view of this
         # region judged (they are the next region's to judge).
-        keep = np.isin(tracks.class_ids, solution.inlier_classes) | \
-            ~np.isin(tracks.class_ids, region.view_classes)
+        keep = ids.member(tracks.class_ids, solution.inlier_classes) | \
+            ~ids.member(tracks.class_ids, region.view_classes)
         tracks = tracks.subset(keep)
         self.tracker.tracks = tracks
         self.camera_pose = solution.estimate.pose
@@ -411,7 +414,7 @@ class Localizer:
 
     def _probe_landmark(self, image: np.ndarray, region, pose: np.ndarray) -> None:
         """Search untracked landmark features where ``pose`` puts them (:mod:`.health`)."""
-        missing = np.setdiff1d(region.landmark, self.tracker.tracks.class_ids)
+        missing = self._ids.difference(region.landmark, self.tracker.tracks.class_ids)
         uv, ok = self.index.project(pose, missing)
         missing, uv = missing[ok], uv[ok]
         count = min(self.config.health_probes, missing.size)
@@ -422,8 +425,8 @@ class Localizer:
         found = self.tracker.search(image, missing[pick], uv[pick],
                                     self.config.redetect_radius_px, remember=False)
         self.health.observe(region.index, region.landmark, found=found.class_ids,
-                            missed=np.setdiff1d(missing[pick], found.class_ids))
-        self.tracker.tracks = self.tracker.tracks.merged(found)
+                            missed=self._ids.difference(missing[pick], found.class_ids))
+        self.tracker.tracks = self.tracker.tracks.merged(found, self._ids)
 
     _probes = 0  # landmark probes so far (round robin over the untracked ones)
 
@@ -483,7 +486,7 @@ class Localizer:
             return  # its windows start next frame, in place of the re-detection's
         self._handover_age += 1
         left = config.switch_redetect - self._handover_searched
-        current = int(np.isin(self.tracker.tracks.class_ids,
+        current = int(self._ids.member(self.tracker.tracks.class_ids,
                               self.index.regions[region].features).sum())
         urgent = current < 2 * config.min_tracked or \
             self._handover_age >= config.handover_frames
@@ -497,7 +500,7 @@ class Localizer:
         if not urgent and tried == count and tried < left:
             return  # more to search, time left, and the current region still holds
         tracks = self.tracker.tracks
-        self.tracker.tracks = tracks.subset(np.isin(tracks.class_ids, new.features))
+        self.tracker.tracks = tracks.subset(self._ids.member(tracks.class_ids, new.features))
         self.region, self._handover = target, -1
         self.stats.predicted_switches += 1
         self.bridge.settle()   # the next region's features are where the pose put them
@@ -514,21 +517,21 @@ class Localizer:
         Returns the tracks with those found and how many were searched (fewer than
         ``count`` when fewer are left that the pose projects into the image).
         """
-        missing = np.setdiff1d(region.features, tracks.class_ids)
+        missing = self._ids.difference(region.features, tracks.class_ids)
         missing = missing[~self.tracker.cooling(missing)]
         if missing.size == 0 or count <= 0:
             return tracks, 0
         uv, ok = self.index.project(pose, missing)
         order = np.flatnonzero(ok)
         if landmark_first:
-            order = order[np.argsort(~np.isin(missing[order], region.landmark),
+            order = order[np.argsort(~self._ids.member(missing[order], region.landmark),
                                      kind='stable')]
         else:
             order = order[self.rng.permutation(order.size)]
         order = order[:count]
         found = self.tracker.search(image, missing[order], uv[order],
                                     self.config.redetect_radius_px)
-        return tracks.merged(found), len(order)
+        return tracks.merged(found, self._ids), len(order)
 
     _switched = False
     _handover = -1  # the region being prepared for a switch, -1 for none
