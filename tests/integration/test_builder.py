@@ -80,14 +80,14 @@ def test_database_is_far_smaller_than_every_descriptor(room_build) -> None:
     features = int(re.search(r'features=(\d+)', room_build['output']).group(1))
     # The regions and their landmarks: 20 times smaller than every descriptor. The scene
     # points (one descriptor each, for poses outside the regions, and a 15 x 15 patch for
-    # those seen by 8 or more images, measured in tracked frames) add less than that
-    # again: the whole file is 9 times smaller (10 before the patches, 1.72 against 2.01
-    # MB on the room).
+    # those seen by 5 or more images, measured in tracked frames) add less than that
+    # again: the whole file is 9 times smaller (the schema 5 room: 0.52 MB). About half
+    # of the room's points have a patch (1,886 of 3,503), those seen by 3 or 4 not.
     tables = database_summary(room_build['db']).table_bytes
     points = tables.get('scene_points', db.points.n_points * 180)
     assert (room_build['db'].stat().st_size - points) * 20 < features * 128
     assert room_build['db'].stat().st_size * 9 < features * 128
-    assert 0 < db.points.patch_mask.sum() < db.points.n_points // 2
+    assert 0 < db.points.patch_mask.sum() < db.points.n_points * 2 // 3
     assert db.points.n_points < features // 20
     assert db.classes.descriptors.shape[0] <= 4 * db.n_classes
 

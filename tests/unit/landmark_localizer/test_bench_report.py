@@ -137,7 +137,7 @@ def test_seed_runs_render_the_run_they_repeat_with_the_seed() -> None:
     from landmark_localizer.errors import LocalizerError
 
     assert parse_seeds('') == [] and parse_seeds('3,11') == [3, 11]
-    for bad in ('3,x', '-1', '4,4'):
+    for bad in ('3,x', '-1', '4,4', '0', '1\u00b2', '\u0661'):
         with pytest.raises(LocalizerError, match='--seeds'):
             parse_seeds(bad)
     argv = seed_render_argv('room_run_effects', 7)
@@ -149,3 +149,22 @@ def test_seed_runs_render_the_run_they_repeat_with_the_seed() -> None:
     assert family_of(seed_run_name('room_run_kidnapped', 7)) == ('room_run_kidnapped', 7)
     with pytest.raises(LocalizerError, match='no run family'):
         seed_render_argv('floor_run', 7)
+
+
+def test_seed_runs_carry_their_runs_targets_without_the_peer_and_a_missing_figure_is_worst(
+        ) -> None:
+    """A seed run is judged as the run it repeats; a run with no figure is not left out."""
+    kidnapped = figures(1.0, 0.0006, 0.002, 0.011, 0.1)
+    lost = figures(0.5, 0.0006, 0.002, 0.011, 0.1, recovery=[None])
+    lens = figures(0.96, 0.0012, 0.007, 0.0115, 0.09)
+    lens['evo'].update(translation_max_m=0.3)
+    runs = {'room_run_kidnapped': kidnapped, 'room_run_kidnapped@s11': lost,
+            'room_run_pinhole': lens, 'room_run_pinhole@s11': dict(lens, evo=None,
+                                                                   accuracy=None)}
+    text, passed = report(runs)
+    assert not passed
+    assert '| room_run_kidnapped frames to a correct pose | 1 | <= 3 | PASS |' in text
+    assert '| room_run_kidnapped@s11 frames to a correct pose | nan | <= 3 | FAIL |' in text
+    assert '| room_run_pinhole@s11 availability | 0.96 | >= 0.95 | PASS |' in text
+    # The seed run without accuracy figures: the family's worst p95 is unknown, not 0.7 cm.
+    assert '| room_run_pinhole, ours | base, 11 | - | - | - | - | 96.0 % |' in text

@@ -34,9 +34,10 @@ class IdTable:
         members = np.asarray(members, np.int64)
         table = self._table
         table[members] = True
-        found = table[values]
-        table[members] = False
-        return found
+        try:
+            return table[values]
+        finally:
+            table[members] = False   # clear even when an id was out of range
 
     def difference(self, values: np.ndarray, members: np.ndarray) -> np.ndarray:
         """Return ``np.setdiff1d(values, members)``: the sorted distinct ids not in members."""

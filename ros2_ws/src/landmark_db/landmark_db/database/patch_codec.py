@@ -9,7 +9,8 @@ tile is the patch padded by its edge pixels to the next multiple of 8, so that J
 8 x 8 blocks never straddle two patches) and each mosaic is coded as a baseline
 grey-scale JPEG. At quality 80 a 15 px patch takes about 55 bytes instead of 225, its
 pixels about 2.6 grey levels (RMS) from the original on patches of about 32 levels of
-spread; the localizer measured the same accuracy with them (docs/localization.md).
+spread; the localizer measured the same accuracy with them (docs/localization.md). At
+70, the builder's default since patches go to points seen by 5 images, about 44 bytes.
 
 The code is the stored form: a database keeps the code and the patches it decodes to
 (:meth:`~landmark_db.database.points.ScenePoints.with_patch_code`), so coding once

@@ -16,7 +16,7 @@ from typing import Any
 
 from landmark_localizer.bench.conditions import CONDITIONS, condition_targets, lens_targets
 from landmark_localizer.bench.peer_report import peer_table, peer_targets
-from landmark_localizer.bench.seeds import seeds_table
+from landmark_localizer.bench.seeds import family_of, seeds_table
 
 __all__ = ['report']
 
@@ -86,49 +86,9 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
     def target(label: str, value: float, limit: float, at_most: bool = True) -> None:
         checks.append((label, value, limit, at_most))
 
+    for name, fig in runs.items():   # each run, and each of its seeds (``--seeds``)
+        checks += _run_checks(family_of(name)[0], name, fig)
     room = runs.get('room_run')
-    if room:
-        acc = _accuracy(room) or {}
-        target('room_run translation median (evo), m', acc.get('translation_median_m',
-               math.nan), t.translation_median_m)
-        target('room_run translation p95 (evo), m', acc.get('translation_p95_m', math.nan),
-               t.translation_p95_m)
-        target('room_run heading median, deg', acc.get('heading_median_deg', math.nan),
-               t.heading_median_deg)
-        target('room_run availability', room['availability'], t.availability, False)
-        target('room_run region changes by prediction',
-               _get(room, 'changes', 'predicted_fraction'), t.predicted_fraction, False)
-        target('room_run latency TRACKING p95, s', _get(room, 'latency', 'tracking_p95'),
-               t.tracking_p95_s)
-        target('room_run latency LOST p95, s', _get(room, 'latency', 'lost_p95'), t.lost_p95_s)
-        target('room_run CPU time TRACKING p95, s', _get(room, 'cpu_latency', 'tracking_p95'),
-               t.tracking_p95_s)
-    kidnapped = runs.get('room_run_kidnapped')
-    if kidnapped:
-        rec = kidnapped.get('recovery') or [None]
-        worst = math.nan if any(r is None for r in rec) else max(rec)
-        target('room_run_kidnapped frames to a correct pose', worst, t.recovery_frames)
-        target('room_run_kidnapped latency LOST p95, s', _get(kidnapped, 'latency', 'lost_p95'),
-               t.lost_p95_s)
-        target('room_run_kidnapped CPU time LOST p95, s',
-               _get(kidnapped, 'cpu_latency', 'lost_p95'), t.lost_p95_s)
-    for name in ('room_run_effects',):
-        fig = runs.get(name)
-        if fig:
-            acc = _accuracy(fig) or {}
-            target(f'{name} translation median (evo), m',
-                   acc.get('translation_median_m', math.nan), t.translation_median_m)
-            target(f'{name} translation p95 (evo), m', acc.get('translation_p95_m', math.nan),
-                   t.translation_p95_m)
-            target(f'{name} heading median, deg', acc.get('heading_median_deg', math.nan),
-                   t.heading_median_deg)
-            target(f'{name} availability', fig['availability'], t.availability, False)
-            target(f'{name} region changes by prediction',
-                   _get(fig, 'changes', 'predicted_fraction'), t.predicted_fraction, False)
-    for camera in ('pinhole', 'fisheye'):
-        if runs.get(f'room_run_{camera}'):
-            checks += lens_targets(f'room_run_{camera}', runs[f'room_run_{camera}'],
-                                   latency=camera == 'pinhole')
     for name in CONDITIONS:
         if f'cond_{name}' in runs:
             checks += condition_targets(name, runs[f'cond_{name}'], runs)
@@ -161,6 +121,46 @@ def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
     lines.append('')
     lines.append('RESULT: ' + ('PASS (every target met)' if passed else 'FAIL (see FAIL rows)'))
     return '\n'.join(lines), passed
+
+
+def _run_checks(family: str, name: str, fig: dict[str, Any]
+                ) -> list[tuple[str, float, float, bool]]:
+    """Return the targets of run ``name`` of ``family`` (a seed run: its family's)."""
+    from landmark_localizer.bench.evaluation import Thresholds
+
+    t = Thresholds()
+    acc = _accuracy(fig) or {}
+    checks: list[tuple[str, float, float, bool]] = []
+
+    def target(label: str, value: float, limit: float, at_most: bool = True) -> None:
+        checks.append((f'{name} {label}', value, limit, at_most))
+
+    if family in ('room_run', 'room_run_effects'):
+        target('translation median (evo), m', acc.get('translation_median_m', math.nan),
+               t.translation_median_m)
+        target('translation p95 (evo), m', acc.get('translation_p95_m', math.nan),
+               t.translation_p95_m)
+        target('heading median, deg', acc.get('heading_median_deg', math.nan),
+               t.heading_median_deg)
+        target('availability', fig['availability'], t.availability, False)
+        target('region changes by prediction', _get(fig, 'changes', 'predicted_fraction'),
+               t.predicted_fraction, False)
+    if family == 'room_run':
+        target('latency TRACKING p95, s', _get(fig, 'latency', 'tracking_p95'),
+               t.tracking_p95_s)
+        target('latency LOST p95, s', _get(fig, 'latency', 'lost_p95'), t.lost_p95_s)
+        target('CPU time TRACKING p95, s', _get(fig, 'cpu_latency', 'tracking_p95'),
+               t.tracking_p95_s)
+    if family == 'room_run_kidnapped':
+        rec = fig.get('recovery') or [None]
+        worst = math.nan if any(r is None for r in rec) else max(rec)
+        target('frames to a correct pose', worst, t.recovery_frames)
+        target('latency LOST p95, s', _get(fig, 'latency', 'lost_p95'), t.lost_p95_s)
+        target('CPU time LOST p95, s', _get(fig, 'cpu_latency', 'lost_p95'), t.lost_p95_s)
+    for camera in ('pinhole', 'fisheye'):
+        if family == f'room_run_{camera}':
+            checks += lens_targets(name, fig, latency=camera == 'pinhole')
+    return checks
 
 
 def _floor_report(floor: dict[str, Any]) -> list[str]:

@@ -48,7 +48,7 @@ _BAGS = {'room_run': 'room_run', 'room_run_kidnapped': 'room_run_kidnapped',
 
 
 def parse_seeds(text: str) -> list[int]:
-    """Return the seeds of ``--seeds`` (comma separated non-negative integers, distinct).
+    """Return the seeds of ``--seeds`` (comma separated positive integers, distinct).
 
     Example:
         >>> parse_seeds('11, 12')
@@ -58,11 +58,14 @@ def parse_seeds(text: str) -> list[int]:
     for item in (part.strip() for part in text.split(',')):
         if not item:
             continue
-        if not item.isdigit():
-            raise LocalizerError(f'--seeds: {item!r} is not a non-negative integer')
-        if int(item) in seeds:
+        seed = int(item) if item.isascii() and item.isdecimal() else -1
+        if seed < 1:
+            # 0 is no new run: --path-seed 0 is the scene's own path, and the lens runs
+            # the benchmark repeats are seed 0 already.
+            raise LocalizerError(f'--seeds: {item!r} is not a positive integer')
+        if seed in seeds:
             raise LocalizerError(f'--seeds: seed {item} given twice')
-        seeds.append(int(item))
+        seeds.append(seed)
     return seeds
 
 
@@ -110,13 +113,25 @@ def _acc(fig: dict[str, Any]) -> dict[str, Any]:
 
 
 def _summary(figs: list[dict[str, Any]]) -> tuple[float, float, float, float, float]:
-    """``(median of medians, worst p95, worst max, median heading, least availability)``."""
+    """``(median of medians, worst p95, worst max, median heading, least availability)``.
+
+    A run without a figure (no pose matched) makes that figure NaN: it is the worst,
+    never left out.
+    """
     def values(key: str) -> list[float]:
         out = [_acc(fig).get(key) for fig in figs]
         return [math.nan if v is None else float(v) for v in out]
 
-    return (statistics.median(values('translation_median_m')), max(values('translation_p95_m')),
-            max(values('translation_max_m')), statistics.median(values('heading_median_deg')),
+    def median(key: str) -> float:
+        v = values(key)
+        return math.nan if any(math.isnan(x) for x in v) else statistics.median(v)
+
+    def worst(key: str) -> float:
+        v = values(key)
+        return math.nan if any(math.isnan(x) for x in v) else max(v)
+
+    return (median('translation_median_m'), worst('translation_p95_m'),
+            worst('translation_max_m'), median('heading_median_deg'),
             min(float(fig['availability']) for fig in figs))
 
 
@@ -149,7 +164,12 @@ def seeds_table(runs: dict[str, dict[str, Any]]) -> list[str]:
             rows.append(('peer tracking', peers))
         for label, figs in rows:
             median, p95, worst, heading, available = _summary(figs)
-            lines.append(f'| {family}, {label} | {seeds} | {100 * median:.3f} cm | '
-                         f'{100 * p95:.3f} cm | {100 * worst:.2f} cm | {heading:.4f} deg | '
-                         f'{100 * available:.1f} % |')
+            lines.append(f'| {family}, {label} | {seeds} | {_cm(median, 3)} | {_cm(p95, 3)} | '
+                         f'{_cm(worst, 2)} | '
+                         + ('-' if math.isnan(heading) else f'{heading:.4f} deg')
+                         + f' | {100 * available:.1f} % |')
     return lines
+
+
+def _cm(value: float, digits: int) -> str:
+    return '-' if math.isnan(value) else f'{100 * value:.{digits}f} cm'
