@@ -30,15 +30,16 @@ from landmark_localizer.errors import LocalizerError
 __all__ = ['SEED_FAMILIES', 'family_of', 'parse_seeds', 'seed_bag_name', 'seed_render_argv',
            'seed_run_name', 'seeds_table']
 
-_PANORAMIC_RUN = ('render', '--scene', 'room', '--camera', 'panoramic', '--speed', '0.5')
+_ROOM_PANORAMA = ('render', '--scene', 'room', '--camera', 'panoramic', '--speed', '0.5')
 #: The room runs and their render settings (without seed and output): the Makefile's
-#: ``room_run`` and ``room_run_kidnapped`` and the benchmark's effects run.
+#: ``room_run`` and ``room_run_kidnapped`` and the benchmark's effects run (``vbn
+#: bench-localize`` renders that one with seed 3 on the scene's path when it is missing).
 SEED_FAMILIES: dict[str, tuple[str, ...]] = {
-    'room_run': (*_PANORAMIC_RUN, '--kind', 'run', '--exposure', '0.08', '--compressed',
+    'room_run': (*_ROOM_PANORAMA, '--kind', 'run', '--exposure', '0.08', '--compressed',
                  '--jpeg-quality', '80'),
-    'room_run_kidnapped': (*_PANORAMIC_RUN, '--kind', 'run-kidnapped', '--exposure', '0.08',
+    'room_run_kidnapped': (*_ROOM_PANORAMA, '--kind', 'run-kidnapped', '--exposure', '0.08',
                            '--compressed', '--jpeg-quality', '80'),
-    'room_run_effects': (*_PANORAMIC_RUN, '--kind', 'run', '--exposure', '0.15', '--blur',
+    'room_run_effects': (*_ROOM_PANORAMA, '--kind', 'run', '--exposure', '0.15', '--blur',
                          '1.0', '--noise', '4', '--compressed', '--jpeg-quality', '80'),
 }
 #: The bag folder each family's runs are named after.

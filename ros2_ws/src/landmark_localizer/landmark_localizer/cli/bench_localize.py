@@ -60,9 +60,8 @@ from typing import Any
 
 __all__ = ['register', 'run']
 
-_RENDER_EFFECTS = ['render', '--scene', 'room', '--kind', 'run', '--camera', 'panoramic',
-                   '--speed', '0.5', '--seed', '3', '--path-seed', '0', '--exposure', '0.15',
-                   '--blur', '1.0', '--noise', '4', '--compressed', '--jpeg-quality', '80']
+#: The effects run's seeds (its render settings: ``seeds.SEED_FAMILIES``).
+_EFFECTS_SEEDS = ['--seed', '3', '--path-seed', '0']
 
 
 def register(subparsers: Any) -> None:
@@ -174,7 +173,7 @@ def run(args: argparse.Namespace) -> int:
     out.mkdir(exist_ok=True)
     log = out / 'bench.log'
     bags, cache = Path(args.bags), Path(args.cache)
-    from landmark_localizer.bench.seeds import parse_seeds
+    from landmark_localizer.bench.seeds import SEED_FAMILIES, parse_seeds
 
     cameras, conditions = _cameras(args.cameras), _conditions(args.conditions)  # typos first
     seeds = parse_seeds(args.seeds)
@@ -183,7 +182,7 @@ def run(args: argparse.Namespace) -> int:
     effects = cache / 'room_run_effects'
     if not effects.exists():
         cache.mkdir(parents=True, exist_ok=True)  # a fresh checkout has no cache/ yet
-        _call(_RENDER_EFFECTS + ['--out', str(effects)], log)
+        _call([*SEED_FAMILIES['room_run_effects'], *_EFFECTS_SEEDS, '--out', str(effects)], log)
     runs: dict[str, dict[str, Any]] = {}
     runs['room_run'] = _localize('room_run', room_db, bags / 'room_run', out, log, args)
     runs['room_run_kidnapped'] = _localize('room_run_kidnapped', room_db,
