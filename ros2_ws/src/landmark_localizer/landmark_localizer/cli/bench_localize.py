@@ -170,13 +170,14 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if not out.parent.is_dir():
         raise LocalizerError(f'folder {out.parent} does not exist')
+    from landmark_localizer.bench.seeds import SEED_FAMILIES, parse_seeds
+
+    # Typos first: a bad option leaves no output folder behind.
+    cameras, conditions = _cameras(args.cameras), _conditions(args.conditions)
+    seeds = parse_seeds(args.seeds)
     out.mkdir(exist_ok=True)
     log = out / 'bench.log'
     bags, cache = Path(args.bags), Path(args.cache)
-    from landmark_localizer.bench.seeds import SEED_FAMILIES, parse_seeds
-
-    cameras, conditions = _cameras(args.cameras), _conditions(args.conditions)  # typos first
-    seeds = parse_seeds(args.seeds)
     room_db = _database(Path(args.room_db) if args.room_db else out / 'room.db',
                         bags / 'room_exploration', args.build_set, log)
     effects = cache / 'room_run_effects'
