@@ -280,3 +280,40 @@ def test_a_turn_into_the_next_heading_sector_switches_to_a_region_of_that_sector
     assert choose_region(index, 0, here, here + [0.0, 0.0, math.radians(40)], 1.0, {}) == 1
     # Back the other way from sector 1 into sector 0.
     assert choose_region(index, 1, here + [0, 0, math.pi / 4], here, 1.0, {}) == 0
+
+
+def test_disc_mask_by_hand() -> None:
+    from landmark_localizer.tracking import disc_mask
+    mask = disc_mask(5, 7, 3.0, 2.0, 1.0)
+    expected = np.zeros((5, 7), np.uint8)
+    expected[2, 2:5] = 255
+    expected[1:4, 3] = 255
+    assert mask.dtype == np.uint8 and np.array_equal(mask, expected)
+    assert not disc_mask(4, 4, -10.0, -10.0, 3.0).any()
+
+
+def test_a_masked_window_keeps_every_keypoint_within_the_radius_and_its_descriptor() -> None:
+    # The window search describes only the keypoints near the prediction (a disc mask
+    # one pixel wider than the radius): the same keypoints and descriptors as
+    # describing the whole window and keeping those within the radius.
+    import cv2
+
+    from landmark_localizer.tracking import disc_mask
+    from vbn_common.features import SiftConfig
+    rng = np.random.default_rng(3)
+    image = cv2.GaussianBlur(rng.integers(0, 256, (41, 41)).astype(np.uint8), (0, 0), 1.2)
+    detector = SiftConfig().create()
+    all_kp, all_desc = detector.detectAndCompute(image, None)
+    checked = 0
+    for centre in ((20.0, 20.0), (14.5, 25.2), (27.0, 12.0)):
+        for radius in (2.0, 6.0, 12.0):
+            pts = np.array([k.pt for k in all_kp])
+            near = np.linalg.norm(pts - centre, axis=1) <= radius
+            kp, desc = detector.detectAndCompute(
+                image, disc_mask(41, 41, centre[0], centre[1], radius + 1.0))
+            got = np.array([k.pt for k in kp]).reshape(-1, 2)
+            keep = np.linalg.norm(got - centre, axis=1) <= radius
+            assert np.allclose(got[keep], pts[near])
+            assert np.array_equal(desc[keep], all_desc[near]) if near.any() else not keep.any()
+            checked += int(near.sum())
+    assert checked >= 5

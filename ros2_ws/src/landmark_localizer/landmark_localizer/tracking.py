@@ -30,7 +30,18 @@ from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.matching import squared_distances
 from landmark_localizer.scene_patches import scene_tracker
 
-__all__ = ['Tracker', 'Tracks']
+__all__ = ['Tracker', 'Tracks', 'disc_mask']
+
+
+def disc_mask(height: int, width: int, cu: float, cv: float, radius: float) -> np.ndarray:
+    """(height, width) uint8 mask: 255 on the pixels within ``radius`` of ``(cu, cv)``.
+
+    OpenCV keeps a keypoint when the mask is set at its rounded pixel, so a disc one
+    pixel wider than a search radius keeps every keypoint within that radius.
+    """
+    du = (np.arange(width) - cu) ** 2
+    dv = (np.arange(height) - cv) ** 2
+    return np.where(dv[:, None] + du[None, :] <= radius * radius, 255, 0).astype(np.uint8)
 
 
 @dataclass
@@ -168,7 +179,10 @@ class Tracker:
             if x1 - x0 < 16 or y1 - y0 < 16:
                 continue
             self.windows += 1
-            keypoints, descriptors = self.detector.detectAndCompute(gray[y0:y1, x0:x1], None)
+            # Descriptors only of the keypoints near the prediction: the rest of the
+            # window is there for the pyramid, and describing it cost most of a search.
+            mask = disc_mask(y1 - y0, x1 - x0, u - x0, v - y0, radius + 1.0)
+            keypoints, descriptors = self.detector.detectAndCompute(gray[y0:y1, x0:x1], mask)
             if not keypoints or descriptors is None:
                 continue
             pts = np.array([k.pt for k in keypoints], np.float32) + np.array([x0, y0],
