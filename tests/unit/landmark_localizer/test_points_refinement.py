@@ -119,3 +119,26 @@ def test_a_prior_carried_from_pose_to_pose_stays_bounded() -> None:
     unknown = PoseSolution(PoseEstimate(*truth, np.full((3, 3), np.nan), 0.5, 0.0, 2, True),
                            ids, 2, len(ids), 0.3)
     assert motion_prior(truth, truth, unknown, config) is None
+
+
+def test_the_source_balance_weighs_the_tracked_features_by_their_measured_errors() -> None:
+    from landmark_localizer.points_refinement import BALANCE_RANGE, SourceBalance
+
+    balance = SourceBalance(rate=0.5)
+    assert balance.weight() == 1.0                         # nothing measured yet
+    balance.update(None)
+    balance.update((float('nan'), 1.0))
+    assert balance.weight() == 1.0
+    balance.update((4.0e-6, 1.0e-6))                       # the first frame: taken as is
+    assert balance.weight() == pytest.approx(0.25)
+    balance.update((2.0e-6, 1.0e-6))                       # halfway to the new frame's
+    assert (balance.tracked, balance.scene) == pytest.approx((3.0e-6, 1.0e-6))
+    assert balance.weight() == pytest.approx(1.0 / 3.0)
+    for _ in range(40):
+        balance.update((1.0e-6, 100.0e-6))                 # scene points far worse
+    assert balance.weight() == BALANCE_RANGE[1]
+    for _ in range(40):
+        balance.update((100.0e-6, 1.0e-6))
+    assert balance.weight() == BALANCE_RANGE[0]
+    with pytest.raises(ValueError, match='rate'):
+        SourceBalance(rate=0.0)

@@ -200,7 +200,8 @@ def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.nd
 def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
                     threshold: float, sigma: float, tilt_prior: float,
                     height_prior: float, iterations: int = 8,
-                    motion_prior: tuple[np.ndarray, np.ndarray] | None = None
+                    motion_prior: tuple[np.ndarray, np.ndarray] | None = None,
+                    point_weights: np.ndarray | None = None
                     ) -> tuple[np.ndarray, np.ndarray] | None:
     """Gauss-Newton with Huber weights: ``(state (6,), covariance of (x, y, yaw))``.
 
@@ -222,6 +223,9 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
         iterations: at most this many Gauss-Newton steps.
         motion_prior: ``(predicted pose (3,), standard deviations (3,))`` of the camera's
             ``(x, y, yaw)`` from the motion model, or None (no prior on the pose).
+        point_weights: (n,) each ray's weight beside its Huber weight, the inverse of
+            its variance relative to the others' (a source measured less well counts
+            less); the rays' noise is then their weighted RMS error. None: all 1.
     """
     state = np.concatenate([np.asarray(pose, float), np.zeros(3)])
     free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])
@@ -238,8 +242,10 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
         r, full = _residuals_and_jacobian(state, rays, points)
         jac = full[:, :, columns].reshape(-1, n_free)
         norms = np.linalg.norm(r, axis=1)
-        weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
-        jw = jac * weights[:, None]
+        weights = np.minimum(1.0, threshold / np.maximum(norms, 1e-12))
+        if point_weights is not None:
+            weights = weights * point_weights
+        jw = jac * np.repeat(weights, 3)[:, None]
         info = jw.T @ jac + prior_info
         offset = state[free] - centre[free]
         offset[2] = float(wrap_angle(offset[2]))  # yaw is always free
@@ -259,9 +265,12 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     r, full = _residuals_and_jacobian(state, rays, points)
     jac = full[:, :, columns].reshape(-1, n_free)
     norms = np.linalg.norm(r, axis=1)
-    weights = np.repeat(np.minimum(1.0, threshold / np.maximum(norms, 1e-12)), 3)
-    noise = max(float(np.sqrt(np.mean(norms ** 2))), sigma) if len(norms) else sigma
-    info = (jac * weights[:, None]).T @ jac * (sigma / noise) ** 2 + prior_info
+    weights = np.minimum(1.0, threshold / np.maximum(norms, 1e-12))
+    squares = norms ** 2
+    if point_weights is not None:
+        weights, squares = weights * point_weights, squares * point_weights
+    noise = max(float(np.sqrt(np.mean(squares))), sigma) if len(norms) else sigma
+    info = (jac * np.repeat(weights, 3)[:, None]).T @ jac * (sigma / noise) ** 2 + prior_info
     try:
         cov = sigma ** 2 * np.linalg.inv(info)[:3, :3]
     except np.linalg.LinAlgError:

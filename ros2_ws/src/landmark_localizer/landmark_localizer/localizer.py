@@ -42,7 +42,7 @@ from landmark_localizer.health import RegionHealth
 from landmark_localizer.ids import IdTable
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.map_search import MapSearch
-from landmark_localizer.points_refinement import motion_prior, refine_on_points
+from landmark_localizer.points_refinement import SourceBalance, motion_prior, refine_on_points
 from landmark_localizer.pose import (
     PoseSolution,
     base_covariance,
@@ -90,6 +90,7 @@ class Localizer:
         self._ids = IdTable(self.index.n_classes)  # class-id set operations of a frame
         self.map_search = MapSearch(self.index, config)
         self.predictor = MotionPredictor()
+        self.balance = SourceBalance()  # tracked features against scene points
         self.bridge = OdometryBridge()
         self.rng = np.random.default_rng(config.seed)
         self.stats = Stats()
@@ -381,7 +382,8 @@ class Localizer:
                 self.index, tracks.class_ids, tracks.uv.astype(float), solution, config,
                 motion_prior=None if predicted is None or not self._moving else motion_prior(
                     predicted, self.camera_pose, self._last_solution, config),
-                scene=self.tracker.scene.measure(image, solution.estimate.pose))
+                scene=self.tracker.scene.measure(image, solution.estimate.pose),
+                tracked_weight=self.balance.weight())
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])
             if jump > config.max_jump_m:   # kidnapped, or features slid onto a look-alike
@@ -406,6 +408,7 @@ class Localizer:
         self.tracker.tracks = tracks
         self.camera_pose = solution.estimate.pose
         self._last_solution = solution
+        self.balance.update(solution.point_noise)
         self._maybe_switch(frame, region.index)
         state = None if solution.tilt is None else np.r_[self.camera_pose, solution.tilt]
         self.tracker.scene.update(image, self.camera_pose, state,

@@ -43,6 +43,9 @@ class PoseSolution:
             them (:func:`~landmark_localizer.points_refinement.refine_on_points`), else None.
         two_view: The camera pose the model views gave (7.4, 7.5) where a refinement on
             3-D points moved it; None where the estimate is that pose itself.
+        point_noise: ``(tracked, scene)`` mean squared angular errors (rad^2) of the
+            tracked features' points and of the scene points at the refined pose, where
+            enough of both joined it (:class:`~.points_refinement.SourceBalance`).
     """
 
     estimate: PoseEstimate
@@ -52,6 +55,7 @@ class PoseSolution:
     residual_px: float
     tilt: np.ndarray | None = None
     two_view: np.ndarray | None = None
+    point_noise: tuple[float, float] | None = None
 
     @property
     def two_view_pose(self) -> np.ndarray | None:
