@@ -12,7 +12,7 @@ from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex, RegionData
 from landmark_localizer.localizer import TRACKING, Frame, Localizer
 from landmark_localizer.matching import grouped_nearest, mutual_matches, squared_distances
-from landmark_localizer.pose import refine_pose, solve_pose
+from landmark_localizer.pose import PoseSolution, refine_pose, solve_pose
 from landmark_localizer.switching import MotionPredictor, choose_region
 from landmark_localizer.tracking import Tracks
 
@@ -317,3 +317,36 @@ def test_a_masked_window_keeps_every_keypoint_within_the_radius_and_its_descript
             assert np.array_equal(desc[keep], all_desc[near]) if near.any() else not keep.any()
             checked += int(near.sum())
     assert checked >= 5
+
+
+def test_a_vote_its_points_could_not_judge_is_refused_where_the_absolute_pose_refutes_it(
+        world, monkeypatch) -> None:
+    """Judged votes start tracking; an unjudged one only if the frame's absolute pose agrees."""
+    from landmark_localizer.voting import Verified
+    from vbn_common.geometry.localize import PoseEstimate
+
+    _, index = world
+
+    def solution(x: float) -> PoseSolution:
+        return PoseSolution(PoseEstimate(x, 1.5, 0.0, np.eye(3) * 1e-4, 0.5, 0.0, 2, True),
+                            np.zeros(0, np.int64), 2, 12, 0.3)
+
+    region = index.regions[0]
+    ids = region.features[:12].copy()
+    frame = Frame(0, np.zeros((64, 64), np.uint8))
+    for judged, voted_x, absolute_x, expected in (
+            (False, 1.0, 1.5, ''),         # 50 cm apart at 1 cm each: refuted
+            (False, 1.0, 1.01, 'vote'),    # agrees
+            (True, 1.0, 1.5, 'vote')):     # judged by its points: the absolute not asked
+        loc = Localizer(index, LocalizerConfig())
+        found = Verified(0, solution(voted_x), ids, np.full((len(ids), 2), 30.0), judged)
+        solved: list[int] = []
+        monkeypatch.setattr(loc, '_best_verified', lambda image, allowed, f=found: f)
+        monkeypatch.setattr(loc, '_solve_absolute',
+                            lambda image, frame, x=absolute_x, s=solved:
+                            (s.append(1), solution(x))[1])
+        assert loc._vote_global(frame.image, frame) == expected
+        assert loc.state == (TRACKING if expected else 'LOST')
+        assert len(solved) == (0 if judged else 1)
+        loc._absolute(frame.image, frame)   # once a frame: not again if the vote asked
+        assert len(solved) == 1

@@ -52,7 +52,7 @@ from landmark_localizer.pose import (
 )
 from landmark_localizer.switching import MotionPredictor, TrackedCounts, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
-from landmark_localizer.voting import Verified, verify, vote
+from landmark_localizer.voting import Verified, refutes, verify, vote
 from vbn_common.features import SiftConfig, extract_features_scaled
 from vbn_common.geometry.frames import compose_poses
 
@@ -201,7 +201,16 @@ class Localizer:
         return self._features[:2]
 
     def _absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
-        """Return the pose from the class points when no region verified (or None)."""
+        """Return the pose from the class points (once a frame; :func:`.voting.refutes`)."""
+        if self._absolute_of is not None and self._absolute_of[0] == self.stats.frames:
+            return self._absolute_of[1]
+        solution = self._solve_absolute(image, frame)
+        self._absolute_of = (self.stats.frames, solution)
+        return solution
+
+    _absolute_of: tuple[int, PoseSolution | None] | None = None
+
+    def _solve_absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
         features, nearest = self._vote_features(image)
         prior = None
         if self._last_camera is not None and self.last_pose_stamp is not None and \
@@ -257,10 +266,13 @@ class Localizer:
         for candidate in vote(features, self.index, self.config, allowed, nearest):
             found = verify(features, self.index.regions[candidate.region], self.index,
                            self.config, self.rng)
-            if found is not None and self.config.absolute_min_inliers > 0 and \
-                    refine_on_points(self.index, found.class_ids, found.uv, found.solution,
-                                     self.config, strict=True) is None:
-                found = None  # too few class points to confirm it, or they disagree
+            if found is not None and self.config.absolute_min_inliers > 0:
+                checked = refine_on_points(self.index, found.class_ids, found.uv,
+                                           found.solution, self.config, strict=True)
+                if checked is None:
+                    found = None  # too few class points to confirm it, or they disagree
+                elif checked is found.solution:   # returned unjudged
+                    found = replace(found, judged=False)
             if found is not None and (best is None or found.solution.inliers >
                                       best.solution.inliers):
                 best = found
@@ -305,7 +317,8 @@ class Localizer:
 
     def _vote_global(self, image: np.ndarray, frame: Frame) -> str:
         found = self._best_verified(image, self._allowed_by_hint())
-        if found is None:
+        if found is None or (not found.judged and
+                             refutes(self._absolute(image, frame), found.solution)):
             return ''
         self.hint = None
         self._start(found, frame)

@@ -30,7 +30,7 @@ from landmark_localizer.matching import mutual_matches
 from landmark_localizer.pose import PoseSolution, solve_pose
 from vbn_common.features import ImageFeatures
 
-__all__ = ['Candidate', 'Verified', 'verify', 'vote']
+__all__ = ['REFUTATION_LIMIT', 'Candidate', 'Verified', 'refutes', 'verify', 'vote']
 
 
 @dataclass(frozen=True)
@@ -55,12 +55,15 @@ class Verified:
         solution: The pose solve against its model views.
         class_ids: (t,) classes matched in the current image (the tracks to start).
         uv: (t, 2) their pixels in the current image.
+        judged: Whether the matched classes' 3-D points judged the pose (False: too few
+            of them, or in too narrow a cone, to tell a wrong motion).
     """
 
     region: int
     solution: PoseSolution
     class_ids: np.ndarray
     uv: np.ndarray
+    judged: bool = True
 
 
 def vote(features: ImageFeatures, index: DatabaseIndex, config: LocalizerConfig,
@@ -111,3 +114,37 @@ def verify(features: ImageFeatures, region: RegionData, index: DatabaseIndex,
         return None
     keep = np.isin(class_ids, solution.inlier_classes)
     return Verified(region.index, solution, class_ids[keep], uv[keep])
+
+
+#: Squared Mahalanobis distance beyond which an absolute pose refutes a vote's: the
+#: 99.9 % quantile of the chi-square with two degrees of freedom.
+REFUTATION_LIMIT = 13.82
+
+
+def refutes(absolute: PoseSolution | None, voted: PoseSolution) -> bool:
+    """Whether a frame's absolute pose refutes a vote its class points could not judge.
+
+    A vote's two-view pose that too few class points, or points in too narrow a cone,
+    could judge may be a wrong motion: on a run whose camera stood 5 cm above the
+    exploration's, after 35 frames posed from the class points within a centimetre, a
+    vote confirmed by 5 of 6 points within 4 degrees put the robot 78 cm off and
+    tracking followed it for 11 frames. The pose from the class points (what a LOST
+    frame publishes) refutes it when their positions differ beyond the 99.9 % bound of
+    their covariances (:data:`REFUTATION_LIMIT`); without one nothing refutes it.
+
+    Example:
+        >>> from vbn_common.geometry.localize import PoseEstimate
+        >>> def at(x): return PoseSolution(PoseEstimate(x, 0.0, 0.0, np.eye(3) * 1e-4,
+        ...                                             0.5, 0.0, 2, True), np.zeros(0), 2, 9, 0.3)
+        >>> refutes(at(0.0), at(0.02)), refutes(at(0.0), at(0.2)), refutes(None, at(0.2))
+        (False, True, False)
+    """
+    if absolute is None:
+        return False
+    a, b = absolute.estimate, voted.estimate
+    d = np.asarray(b.pose[:2], float) - np.asarray(a.pose[:2], float)
+    joint = np.asarray(a.covariance, float)[:2, :2] + np.asarray(b.covariance, float)[:2, :2]
+    try:
+        return bool(d @ np.linalg.solve(joint, d) > REFUTATION_LIMIT)
+    except np.linalg.LinAlgError:
+        return False
