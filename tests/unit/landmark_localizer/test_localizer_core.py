@@ -350,3 +350,34 @@ def test_a_vote_its_points_could_not_judge_is_refused_where_the_absolute_pose_re
         assert len(solved) == (0 if judged else 1)
         loc._absolute(frame.image, frame)   # once a frame: not again if the vote asked
         assert len(solved) == 1
+
+
+def test_refuted_votes_leave_the_frames_lost_and_the_absolute_pose_is_solved_once_a_frame(
+        world, monkeypatch) -> None:
+    """LOST frames and a lost track alike: an unjudged vote the absolute pose refutes is
+    not started from, and each frame solves its absolute pose once (then publishes it)."""
+    from landmark_localizer.voting import Verified
+    from vbn_common.geometry.localize import PoseEstimate
+
+    _, index = world
+
+    def solution(x: float, views: int = 2) -> PoseSolution:   # 0 views: an absolute pose
+        return PoseSolution(PoseEstimate(x, 1.5, 0.0, np.eye(3) * 1e-4, 0.5, 0.0, 2, True),
+                            np.zeros(0, np.int64), views, 12, 0.3)
+
+    ids = index.regions[0].features[:12].copy()
+    unjudged = Verified(0, solution(1.0), ids, np.full((len(ids), 2), 30.0), judged=False)
+    loc = Localizer(index, LocalizerConfig())
+    solved: list[int] = []
+    monkeypatch.setattr(loc, '_best_verified', lambda image, allowed: unjudged)
+    monkeypatch.setattr(loc, '_solve_absolute',
+                        lambda image, frame: (solved.append(1), solution(1.5, 0))[1])
+    image = np.zeros((64, 64), np.uint8)
+    for i in range(2):
+        estimate = loc.step(Frame(i * 10**8, image))
+        assert (loc.state, estimate.event, len(solved)) == ('LOST', 'absolute', i + 1)
+        assert estimate.pose is not None
+    loc.state, loc.region, loc.camera_pose = TRACKING, 0, np.array([1.5, 1.5, 0.0])
+    monkeypatch.setattr(loc, '_track', lambda image, frame: (None, 0, True))   # features lost
+    estimate = loc.step(Frame(3 * 10**8, image))
+    assert (loc.state, len(solved)) == ('LOST', 3)

@@ -142,3 +142,72 @@ def test_the_source_balance_weighs_the_tracked_features_by_their_measured_errors
     assert balance.weight() == BALANCE_RANGE[0]
     with pytest.raises(ValueError, match='rate'):
         SourceBalance(rate=0.0)
+
+
+def _seed(ids: np.ndarray):  # noqa: ANN202 - a two-view seed 2 cm off AHEAD
+    from localizer_samples import AHEAD
+
+    from landmark_localizer.pose import PoseSolution
+    from vbn_common.geometry.localize import PoseEstimate
+    return PoseSolution(PoseEstimate(*(AHEAD + [0.02, -0.01, 0.005]), np.eye(3) * 1e-4, 0.5,
+                                     0.0, 2, True), ids, 2, len(ids), 0.3)
+
+
+def test_a_vote_is_judged_by_its_points_or_returned_as_it_is() -> None:
+    """The seed object itself comes back where the points cannot judge it (the localizer
+    tells an unjudged vote by that); a strict check refuses too few points."""
+    from localizer_samples import AHEAD, wall_ahead
+
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import refine_on_points
+
+    config = LocalizerConfig()
+    _, index, uv, ids = wall_ahead(30, -0.9, 3.9)                  # 60 degrees wide
+    seed = _seed(ids)
+    judged = refine_on_points(index, ids, uv, seed, config, strict=True)
+    assert judged is not None and judged is not seed
+    assert np.hypot(*(judged.estimate.pose[:2] - AHEAD[:2])) < 1e-3
+    _, narrow_index, narrow_uv, narrow_ids = wall_ahead(30, 1.3, 1.7)   # 4 degrees
+    narrow = _seed(narrow_ids)
+    assert refine_on_points(narrow_index, narrow_ids, narrow_uv, narrow, config,
+                            strict=True) is narrow
+    assert refine_on_points(index, ids[:3], uv[:3], _seed(ids[:3]), config, strict=True) is None
+
+
+def test_the_tracked_features_weight_and_both_sources_errors() -> None:
+    """Tracked features at 0.6 px, scene points at 0.1 px on the same wall.
+
+    The solution reports each source's mean squared error (tracked about 36 times the
+    scene's); weighing the tracked ones by that ratio brings the pose nearer the truth
+    over ten draws; without scene points the weight changes nothing.
+    """
+    from localizer_samples import AHEAD, project, wall_ahead
+
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.points_refinement import refine_on_points
+
+    config = LocalizerConfig()
+    _, index, uv, ids = wall_ahead(30, -0.9, 3.9)
+    rng = np.random.default_rng(5)
+    xyz = np.column_stack([np.full(40, 6.0), rng.uniform(-0.9, 3.9, 40),
+                           rng.uniform(0.6, 2.0, 40)])
+    scene_uv, ok = project(AHEAD, xyz)
+    xyz, scene_uv = xyz[ok], scene_uv[ok]
+    xyz_stored = xyz.copy()
+    xyz_stored[:, 2] -= 1.2   # the index's points are relative to the camera's height
+    errors = {1.0: [], 0.05: []}
+    for _ in range(10):
+        tracked = uv + rng.normal(0, 0.6, uv.shape)
+        scene = (scene_uv + rng.normal(0, 0.1, scene_uv.shape), xyz_stored)
+        for weight, found in errors.items():
+            solution = refine_on_points(index, ids, tracked, _seed(ids), config, scene=scene,
+                                        tracked_weight=weight)
+            found.append(np.hypot(*(solution.estimate.pose[:2] - AHEAD[:2])))
+            if weight == 1.0:
+                assert solution.point_noise is not None
+                assert solution.point_noise[0] > 10 * solution.point_noise[1]
+    assert np.mean(errors[0.05]) < 0.7 * np.mean(errors[1.0])
+    alone = [refine_on_points(index, ids, uv + 0.3, _seed(ids), config, tracked_weight=w)
+             for w in (1.0, 0.2)]
+    np.testing.assert_array_equal(alone[0].estimate.pose, alone[1].estimate.pose)
+    assert alone[0].point_noise is None

@@ -225,7 +225,8 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
             ``(x, y, yaw)`` from the motion model, or None (no prior on the pose).
         point_weights: (n,) each ray's weight beside its Huber weight, the inverse of
             its variance relative to the others' (a source measured less well counts
-            less); the rays' noise is then their weighted RMS error. None: all 1.
+            less); the rays' noise is then that of a ray of weight 1, the RMS of the
+            weighted squared errors. None: all 1.
     """
     state = np.concatenate([np.asarray(pose, float), np.zeros(3)])
     free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])

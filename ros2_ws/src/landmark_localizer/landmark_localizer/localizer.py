@@ -161,7 +161,7 @@ class Localizer:
         self.last_stamp = frame.stamp_ns
         self.stats.frames += 1
         self.tracker.next_frame()
-        self._features = self._scene = None
+        self._features = self._scene = self._absolute_of = None
         solution: PoseSolution | None = None
         tracked = 0
         if self.state == TRACKING:
@@ -202,13 +202,11 @@ class Localizer:
 
     def _absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
         """Return the pose from the class points (once a frame; :func:`.voting.refutes`)."""
-        if self._absolute_of is not None and self._absolute_of[0] == self.stats.frames:
-            return self._absolute_of[1]
-        solution = self._solve_absolute(image, frame)
-        self._absolute_of = (self.stats.frames, solution)
-        return solution
+        if self._absolute_of is None:
+            self._absolute_of = (self._solve_absolute(image, frame),)
+        return self._absolute_of[0]
 
-    _absolute_of: tuple[int, PoseSolution | None] | None = None
+    _absolute_of: tuple[PoseSolution | None] | None = None  # this frame's, once computed
 
     def _solve_absolute(self, image: np.ndarray, frame: Frame) -> PoseSolution | None:
         features, nearest = self._vote_features(image)
@@ -273,9 +271,9 @@ class Localizer:
                     found = None  # too few class points to confirm it, or they disagree
                 elif checked is found.solution:   # returned unjudged
                     found = replace(found, judged=False)
-            if found is not None and (best is None or found.solution.inliers >
-                                      best.solution.inliers):
-                best = found
+            if found is not None and (best is None or (found.judged, found.solution.inliers)
+                                      > (best.judged, best.solution.inliers)):
+                best = found   # a vote its points judged first
         return best
 
     def _start(self, found: Verified, frame: Frame) -> None:
@@ -333,6 +331,9 @@ class Localizer:
         if found is None:
             found = self._best_verified(image, None)
             event = 'global_vote'
+        if found is not None and not found.judged and \
+                refutes(self._absolute(image, frame), found.solution):
+            found = None
         if found is None:
             self.state, self.region, self.camera_pose = LOST, -1, None
             self._handover = -1

@@ -215,7 +215,7 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
         return seed
     if near.any() or not np.array_equal(first, inliers):  # else: refined on them already
         for attempt in range(2):  # scene points the refined pose brings near then join
-            weights = None if tracked_weight == 1.0 else \
+            weights = None if tracked_weight == 1.0 or not near.any() else \
                 np.r_[np.full(len(rays), tracked_weight), np.ones(int(near.sum()))]
             found = refine_absolute(state[:3], all_rays, all_points, *args,
                                     point_weights=weights)

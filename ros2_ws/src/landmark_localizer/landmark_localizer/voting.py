@@ -56,7 +56,8 @@ class Verified:
         class_ids: (t,) classes matched in the current image (the tracks to start).
         uv: (t, 2) their pixels in the current image.
         judged: Whether the matched classes' 3-D points judged the pose (False: too few
-            of them, or in too narrow a cone, to tell a wrong motion).
+            of them, in too narrow a cone, or their refinement failed: they cannot tell
+            a wrong motion).
     """
 
     region: int
@@ -130,7 +131,9 @@ def refutes(absolute: PoseSolution | None, voted: PoseSolution) -> bool:
     vote confirmed by 5 of 6 points within 4 degrees put the robot 78 cm off and
     tracking followed it for 11 frames. The pose from the class points (what a LOST
     frame publishes) refutes it when their positions differ beyond the 99.9 % bound of
-    their covariances (:data:`REFUTATION_LIMIT`); without one nothing refutes it.
+    their covariances (:data:`REFUTATION_LIMIT`); without one nothing refutes it. The
+    localizer asks this of the vote it would start from, LOST or recovering a loss, and
+    prefers among a frame's candidates the ones their points judged.
 
     Example:
         >>> from vbn_common.geometry.localize import PoseEstimate
