@@ -211,3 +211,27 @@ def test_the_tracked_features_weight_and_both_sources_errors() -> None:
              for w in (1.0, 0.2)]
     np.testing.assert_array_equal(alone[0].estimate.pose, alone[1].estimate.pose)
     assert alone[0].point_noise is None
+
+
+def test_a_judged_vote_starts_from_the_pose_its_points_polished(monkeypatch) -> None:
+    """A two-view vote 2 cm off, confirmed by 30 class points over 60 degrees: the vote
+    the localizer starts from carries the polished pose (within a millimetre)."""
+    from localizer_samples import AHEAD, wall_ahead
+
+    from landmark_localizer.config import LocalizerConfig
+    import landmark_localizer.localizer as localizer
+    from landmark_localizer.voting import Candidate, Verified
+
+    _, index, uv, ids = wall_ahead(30, -0.9, 3.9)
+    loc = localizer.Localizer(index, LocalizerConfig())
+    seed = _seed(ids)
+    monkeypatch.setattr(loc, '_vote_features', lambda image, full=False: (None, None))
+    monkeypatch.setattr(localizer, 'vote', lambda *args, **kwargs: [Candidate(0, 30)])
+    monkeypatch.setattr(localizer, 'verify',
+                        lambda *args, **kwargs: Verified(0, seed, ids, uv))
+    found = loc._verified(np.zeros((64, 64), np.uint8), None, full=False)
+    assert found is not None and found.judged
+    assert np.hypot(*(seed.estimate.pose[:2] - AHEAD[:2])) > 0.02
+    assert np.hypot(*(found.solution.estimate.pose[:2] - AHEAD[:2])) < 1e-3
+    assert found.solution.two_view_pose is not None
+    np.testing.assert_allclose(found.solution.two_view_pose, seed.estimate.pose)

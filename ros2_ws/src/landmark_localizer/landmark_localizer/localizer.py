@@ -269,8 +269,9 @@ class Localizer:
                                            found.solution, self.config, strict=True)
                 if checked is None:
                     found = None  # too few class points to confirm it, or they disagree
-                elif checked is found.solution:   # returned unjudged
-                    found = replace(found, judged=False)
+                else:   # unjudged: the seed itself; judged: the pose the points polished
+                    found = replace(found, solution=checked,
+                                    judged=checked is not found.solution)
             if found is not None and (best is None or (found.judged, found.solution.inliers)
                                       > (best.judged, best.solution.inliers)):
                 best = found   # a vote its points judged first
