@@ -115,10 +115,14 @@ def point_errors(index: DatabaseIndex, state: np.ndarray, uv: np.ndarray, xyz: n
     """
     state = np.concatenate([np.asarray(state, float), np.zeros(3)])[:6] \
         if len(state) == 3 else np.asarray(state, float)
-    rays = base_rays(index.frame_camera.unproject(np.asarray(uv, float))) @ \
-        _tilt_rotation(state[3], state[4]).T
-    return _angular_errors(state[None, :3], rays,
-                           np.asarray(xyz, float) - np.array([0.0, 0.0, state[5]]))[0]
+    return _state_errors(state, base_rays(index.frame_camera.unproject(np.asarray(uv, float))),
+                         np.asarray(xyz, float))
+
+
+def _state_errors(state: np.ndarray, rays: np.ndarray, xyz: np.ndarray) -> np.ndarray:
+    """(n,) angular errors of rays (level base frame) at a ``(6,)`` state, radians."""
+    return _angular_errors(state[None, :3], rays @ _tilt_rotation(state[3], state[4]).T,
+                           xyz - np.array([0.0, 0.0, state[5]]))[0]
 
 
 #: Mahalanobis distance (3 degrees of freedom, the motion prior's own spread) of the
@@ -140,9 +144,7 @@ def _scene_inliers(state: np.ndarray, rays: np.ndarray, xyz: np.ndarray, thresho
     """(n,) bool: scene measurements (rays in the level base frame) the state explains."""
     if not len(rays):
         return np.zeros(0, bool)
-    turned = rays @ _tilt_rotation(state[3], state[4]).T
-    return _angular_errors(state[None, :3], turned,
-                           xyz - np.array([0.0, 0.0, state[5]]))[0] <= threshold
+    return _state_errors(state, rays, xyz) <= threshold
 
 
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
@@ -194,9 +196,7 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     if found is None:
         return seed
     state, _ = found
-    turned = rays @ _tilt_rotation(state[3], state[4]).T
-    shifted = points - np.array([0.0, 0.0, state[5]])
-    first, inliers = inliers, _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
+    first, inliers = inliers, _state_errors(state, rays, points) <= threshold
     rays, points = rays[inliers], points[inliers]
     scene_rays = scene_xyz = np.zeros((0, 3))
     if scene is not None and len(scene[0]):
@@ -245,8 +245,7 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
                             est.in_front)
     noise = None
     if len(rays) >= BALANCE_POINTS and len(all_rays) - len(rays) >= BALANCE_POINTS:
-        errors = _angular_errors(state[None, :3], all_rays @ _tilt_rotation(*state[3:5]).T,
-                                 all_points - np.array([0.0, 0.0, state[5]]))[0] ** 2
+        errors = _state_errors(state, all_rays, all_points) ** 2
         noise = (float(errors[:len(rays)].mean()), float(errors[len(rays):].mean()))
     return PoseSolution(estimate, seed.inlier_classes, seed.views_used, seed.inliers,
                         seed.residual_px, state[3:].copy(), seed.two_view_pose, noise)
