@@ -36,7 +36,7 @@ import math
 import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
-from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.index import DatabaseIndex, tilt_rotation
 from landmark_localizer.pose import PoseSolution
 from vbn_common.features import ImageFeatures
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, wrap_angle
@@ -175,22 +175,14 @@ def _coarse_inliers(poses: np.ndarray, rays: np.ndarray, points: np.ndarray,
         (np.einsum('mnk,nk->mn', v, rays) > 0)
 
 
-def _tilt_rotation(pitch: float, roll: float) -> np.ndarray:
-    """Return a small extra tilt of the frame, applied to its rays in the base frame."""
-    cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])  # about y (left)
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])  # about x (forward)
-    return ry @ rx
-
-
 def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(n, 3) observed ray (tilted by the state) minus the predicted direction.
 
-    The same as :func:`_tilt_rotation` and :func:`_predicted`; the refinement takes its
+    The same as :func:`tilt_rotation` and :func:`_predicted`; the refinement takes its
     derivatives from :func:`_residuals_and_jacobian`.
     """
     x, y, yaw, pitch, roll, dz = (float(v) for v in state)
-    turned = rays @ _tilt_rotation(pitch, roll).T
+    turned = rays @ tilt_rotation(pitch, roll).T
     dx, dy, dzp = points[:, 0] - x, points[:, 1] - y, points[:, 2] - dz
     c, s = math.cos(yaw), math.sin(yaw)
     v = np.column_stack([c * dx + s * dy, -s * dx + c * dy, dzp])
@@ -403,7 +395,7 @@ def _finish(start: np.ndarray, rays: np.ndarray, points: np.ndarray, threshold: 
     if found is None:
         return None
     state, _ = found
-    turned = rays @ _tilt_rotation(state[3], state[4]).T
+    turned = rays @ tilt_rotation(state[3], state[4]).T
     shifted = points - np.array([0.0, 0.0, state[5]])
     inliers = _angular_errors(state[None, :3], turned, shifted)[0] <= threshold
     if inliers.sum() < min_inliers or _spread(rays[inliers]) < min_spread:

@@ -38,7 +38,7 @@ from vbn_common.geometry.camera import CameraModel, camera_from_info, pixels_per
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from vbn_common.geometry.mount import tilted
 
-__all__ = ['DatabaseIndex', 'RegionData', 'ViewData']
+__all__ = ['DatabaseIndex', 'RegionData', 'ViewData', 'tilt_rotation']
 
 #: FLANN's randomised KD-trees (``FLANN_INDEX_KDTREE``), trees in the forest, and the
 #: neighbours fetched per query (enough to find the nearest descriptor of another class:
@@ -377,10 +377,13 @@ class DatabaseIndex:
 
     def project_points(self, camera_pose: np.ndarray, points: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels of 3-D points (``z`` from the camera height) from a planar camera pose.
+        """Pixels of 3-D points (``z`` from the camera height) from a camera pose.
 
-        Returns ``(uv (n, 2), valid (n,))``: NaN and False for a point that is not finite
-        or falls outside the image of :attr:`frame_camera`.
+        ``camera_pose``: planar ``(x, y, yaw)``, or ``(x, y, yaw, pitch, roll, dz)`` with
+        the frame's own tilt and height offset (the state of
+        :func:`.absolute_pose.refine_absolute`). Returns ``(uv (n, 2), valid (n,))``: NaN
+        and False for a point that is not finite or falls outside the image of
+        :attr:`frame_camera`.
         """
         pts = np.asarray(points, float).reshape(-1, 3)
         ok = np.all(np.isfinite(pts), axis=1)
@@ -388,6 +391,10 @@ class DatabaseIndex:
         dx, dy = pts[:, 0] - x, pts[:, 1] - y
         c, s = math.cos(yaw), math.sin(yaw)
         base = np.stack([c * dx + s * dy, -s * dx + c * dy, pts[:, 2]], axis=1)
+        if len(camera_pose) >= 6 and np.any(np.asarray(camera_pose[3:6], float) != 0.0):
+            pitch, roll, dz = (float(v) for v in camera_pose[3:6])
+            base[:, 2] -= dz
+            base = base @ tilt_rotation(pitch, roll)   # the tilted frame's rays: R^T v
         optical = base @ BASE_TO_CAMERA_ROTATION  # p_optical = M^T p_base
         uv = np.full((len(pts), 2), np.nan)
         if ok.any():
@@ -395,6 +402,19 @@ class DatabaseIndex:
             uv[ok] = proj
             ok[ok] = valid
         return uv, ok
+
+
+def tilt_rotation(pitch: float, roll: float) -> np.ndarray:
+    """Return a small extra tilt of the frame, applied to its rays in the base frame.
+
+    A frame tilted by ``(pitch, roll)`` sees the level direction ``v`` along the ray
+    ``R^T v``, ``R`` this matrix (:func:`.absolute_pose.refine_absolute` turns measured
+    rays by ``R`` into the level base frame).
+    """
+    cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
+    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])  # about y (left)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])  # about x (forward)
+    return ry @ rx
 
 
 def _kd_forest(descriptors: np.ndarray) -> cv2.flann_Index:

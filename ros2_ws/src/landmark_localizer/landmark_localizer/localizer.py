@@ -397,7 +397,7 @@ class Localizer:
                 self.index, tracks.class_ids, tracks.uv.astype(float), solution, config,
                 motion_prior=None if predicted is None or not self._moving else motion_prior(
                     predicted, self.camera_pose, self._last_solution, config),
-                scene=self.tracker.scene.measure(image, solution.estimate.pose),
+                scene=lambda pose: self.tracker.scene.measure(image, pose),
                 tracked_weight=self.balance.weight())
         if solution is not None and predicted is not None:
             jump = np.linalg.norm(solution.estimate.pose[:2] - predicted[:2])

@@ -11,6 +11,7 @@ the final refinement; they never judge the seed.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 import math
 
 import numpy as np
@@ -20,18 +21,21 @@ from landmark_localizer.absolute_pose import (
     _angular_errors,
     _coarse_inliers,
     _spread,
-    _tilt_rotation,
     base_rays,
     refine_absolute,
 )
 from landmark_localizer.config import LocalizerConfig
-from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.index import DatabaseIndex, tilt_rotation
 from landmark_localizer.pose import PoseSolution
 from vbn_common.geometry.frames import wrap_angle
 from vbn_common.geometry.localize import PoseEstimate
 
-__all__ = ['BALANCE_POINTS', 'BALANCE_RANGE', 'SourceBalance', 'motion_prior', 'point_errors',
-           'refine_on_points']
+__all__ = ['BALANCE_POINTS', 'BALANCE_RANGE', 'SceneMeasure', 'SourceBalance', 'motion_prior',
+           'point_errors', 'refine_on_points']
+
+#: Measures the scene points from a camera state ``(x, y, yaw, pitch, roll, dz)``:
+#: ``(uv, xyz)``.
+SceneMeasure = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 #: Least points of each source for a frame to measure their errors.
 BALANCE_POINTS = 5
@@ -121,7 +125,7 @@ def point_errors(index: DatabaseIndex, state: np.ndarray, uv: np.ndarray, xyz: n
 
 def _state_errors(state: np.ndarray, rays: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     """(n,) angular errors of rays (level base frame) at a ``(6,)`` state, radians."""
-    return _angular_errors(state[None, :3], rays @ _tilt_rotation(state[3], state[4]).T,
+    return _angular_errors(state[None, :3], rays @ tilt_rotation(state[3], state[4]).T,
                            xyz - np.array([0.0, 0.0, state[5]]))[0]
 
 
@@ -150,7 +154,7 @@ def _scene_inliers(state: np.ndarray, rays: np.ndarray, xyz: np.ndarray, thresho
 def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray,
                      seed: PoseSolution, config: LocalizerConfig, strict: bool = False,
                      motion_prior: tuple[np.ndarray, np.ndarray] | None = None,
-                     scene: tuple[np.ndarray, np.ndarray] | None = None,
+                     scene: tuple[np.ndarray, np.ndarray] | SceneMeasure | None = None,
                      tracked_weight: float = 1.0) -> PoseSolution | None:
     """Check and polish a pose solve on the tracked features' class points.
 
@@ -168,8 +172,12 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     Thresholds are in :attr:`DatabaseIndex.residual_focal` pixels. ``strict`` (a vote,
     which no prediction checks): None as well when there are too few points to judge
     by. ``scene``: ``(uv, xyz)`` of scene points measured in the frame
-    (:mod:`.scene_tracks`); those within ``absolute_threshold_px`` of the pose the
-    tracked features give join its final refinement (they never judge the seed). The
+    (:mod:`.scene_tracks`), or a function measuring them from a camera state
+    (:data:`SceneMeasure`), which is then asked at the state the tracked features'
+    points give, tilt and height included (not at the seed's: a two-view pose 8 cm and
+    2 degrees off predicted the points beyond their search, and a third of them were
+    measured); those within ``absolute_threshold_px``
+    of that pose join its final refinement (they never judge the seed). The
     refinement's Huber threshold is ``absolute_huber_px``. ``tracked_weight``: the
     weight of a tracked feature's point beside a scene point's in that refinement
     (:class:`SourceBalance`); the solution reports both sources' errors there.
@@ -198,6 +206,8 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     state, _ = found
     first, inliers = inliers, _state_errors(state, rays, points) <= threshold
     rays, points = rays[inliers], points[inliers]
+    if callable(scene):
+        scene = scene(state.copy())
     scene_rays = scene_xyz = np.zeros((0, 3))
     if scene is not None and len(scene[0]):
         scene_rays = base_rays(index.frame_camera.unproject(np.asarray(scene[0], float)))
