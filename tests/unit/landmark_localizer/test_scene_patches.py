@@ -10,6 +10,7 @@ import pytest
 
 from landmark_db.database import ScenePoints
 from landmark_localizer.config import LocalizerConfig
+from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.scene_patches import PatchTracks, affine_maps, scene_tracker
 from landmark_localizer.scene_tracks import SceneTracks
@@ -135,3 +136,23 @@ def test_the_tracker_follows_the_database(world) -> None:
     assert type(scene_tracker(without, config, None)) is SceneTracks
     assert type(scene_tracker(index, replace(config, scene_tracks=0), None)) is SceneTracks
     assert type(scene_tracker(index, config, None)) is PatchTracks
+
+
+def test_points_with_a_patch_are_measured_from_farther_than_a_sift_search(world) -> None:
+    """Seen from within 1 m of (3, 1.5): SIFT searches them up to 1.15 m from there, their
+    patches (the warp follows the viewpoint) up to 1 m plus ``scene_patch_margin_m``."""
+    from landmark_localizer.tracking import Tracker
+
+    index, xyz = world
+    far = np.array([4.0, 0.5, 0.0])        # 1.41 m
+    beyond = np.array([1.5, 1.0, 0.0])     # 1.58 m
+    sift = SceneTracks(index, LocalizerConfig(scene_tracks=40), None)
+    assert len(sift._candidates(far)) == 0
+    assert len(_tracks(index)._candidates(far)) == len(xyz)          # 0.5 m by default
+    assert len(_tracks(index)._candidates(beyond)) == 0
+    assert len(_tracks(index, scene_patch_margin_m=0.3)._candidates(far)) == 0
+    tracker = Tracker(index, LocalizerConfig(scene_tracks=40), SiftConfig().create())
+    tracker.set_config(LocalizerConfig(scene_tracks=40, scene_patch_margin_m=0.6))
+    assert len(tracker.scene._candidates(beyond)) == len(xyz)
+    with pytest.raises(LocalizerError, match='scene_patch_margin_m'):
+        LocalizerConfig(scene_patch_margin_m=-0.1)

@@ -92,7 +92,14 @@ class LocalizerConfig:
             of schema 4 measures them by their exploration patches
             (:mod:`landmark_localizer.scene_patches`; 40 on ``room_run`` over DDS: the
             median error 0.25 -> 0.06 cm, p95 1.82 -> 0.30 cm, node latency p50 20 ->
-            27 ms), an older one by SIFT windows (:mod:`landmark_localizer.scene_tracks`).
+            27 ms; 80 rather than 40: the pinhole room's mean p95 over three seeds 0.358
+            -> 0.323 cm, ``room_run``'s 0.146 -> 0.111 cm), an older one by SIFT windows
+            (:mod:`landmark_localizer.scene_tracks`).
+        scene_patch_margin_m: a scene point measured by its patch is chosen only where
+            the camera stands within its exploration images' spread plus this margin,
+            metres. Wider than a SIFT search's (``SEEN_MARGIN_M``, 0.15 m: SIFT finds a
+            feature at the scales it was seen at): the warp follows the viewpoint, and a
+            patch the viewpoint distorts too much fails its scale or correlation check.
         scene_window_budget: SIFT windows a frame may search in all; new scene points
             are searched with what the tracker left (a database without patches).
         scene_search_deg: a new scene point is searched within this angle of where the
@@ -157,7 +164,8 @@ class LocalizerConfig:
     absolute_bridged_min_inliers: int = 10
     motion_prior_m: float = 0.02
     motion_prior_deg: float = 1.0
-    scene_tracks: int = 40
+    scene_tracks: int = 80
+    scene_patch_margin_m: float = 0.5
     scene_window_budget: int = 10
     scene_search_deg: float = 1.75
     scene_patch_px: int = 31
@@ -200,7 +208,8 @@ class LocalizerConfig:
             raise LocalizerError(f'scene_patch_px must be odd and >= 11, got '
                                  f'{self.scene_patch_px}')
         for name in ('bridge_std_per_m', 'bridge_yaw_deg_per_m', 'bridge_yaw_std_per_rad',
-                     'bridge_max_std_m', 'bridge_max_s', 'exposure_target'):
+                     'bridge_max_std_m', 'bridge_max_s', 'exposure_target',
+                     'scene_patch_margin_m'):
             if getattr(self, name) < 0:
                 raise LocalizerError(f'{name} must be >= 0, got {getattr(self, name)}')
         for name in ('scene_search_deg', 'scene_max_move_m', 'absolute_huber_px'):

@@ -9,7 +9,8 @@ exploration image centred on the point and the patch's axes
 those patches instead, in every tracked frame, with no SIFT:
 
 - **Choose**: the points measured in the previous frame, then points seen from near the
-  current position (as :mod:`.scene_tracks`), round the image's cells emptiest first,
+  current position (as :mod:`.scene_tracks`, but within ``scene_patch_margin_m`` of
+  their images' spread rather than SIFT's 0.15 m), round the image's cells emptiest first,
   up to ``scene_tracks``, and not searched for ``redetect_cooldown`` frames after the
   pose rejected one.
 - **Warp**: the frame's pose projects each point and the ends of its patch axes; the
@@ -83,7 +84,8 @@ class PatchTracks(SceneTracks):
 
     Args:
         index: The database index; its scene points have patches.
-        config: ``scene_tracks``, ``redetect_cooldown``, ``absolute_threshold_px``.
+        config: ``scene_tracks``, ``scene_patch_margin_m``, ``redetect_cooldown``,
+            ``absolute_threshold_px``.
         detector: Unused (the interface of :class:`SceneTracks`).
     """
 
@@ -95,10 +97,18 @@ class PatchTracks(SceneTracks):
         self._axes = np.asarray(points.patch_axes, float)
         self._has_patch = points.patch_mask
 
+    def margin_m(self) -> float:
+        """How far beyond its images' spread a point is measured from: ``scene_patch_margin_m``."""
+        return float(self.config.scene_patch_margin_m)
+
     # -- measurement ---------------------------------------------------------------
     def measure(self, image: np.ndarray, camera_pose: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
-        """Return ``(uv (m, 2), xyz (m, 3))``: the points aligned near where the pose puts them."""
+        """Return ``(uv (m, 2), xyz (m, 3))``: the points aligned near where the pose puts them.
+
+        ``camera_pose``: planar ``(x, y, yaw)``, or with the frame's tilt and height offset
+        ``(x, y, yaw, pitch, roll, dz)`` (:meth:`.DatabaseIndex.project_points`).
+        """
         self._measured_rows = np.zeros(0, np.int64)
         self._measured_at = self._frame
         none = np.zeros((0, 2)), np.zeros((0, 3))

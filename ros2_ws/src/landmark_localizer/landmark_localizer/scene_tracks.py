@@ -81,7 +81,7 @@ class SceneTracks:
         points = index.database.points
         self.enabled = config.scene_tracks > 0 and points.has_seen_from
         if self.enabled:
-            self._seen_near_places(np.asarray(points.seen_from, float))
+            self._seen_near_places(np.asarray(points.seen_from, float), self.margin_m())
         self._failed = np.full(points.n_points, -10**9, np.int64)
         self._frame = 0
         self._measured_at = -1
@@ -211,15 +211,19 @@ class SceneTracks:
         return near[(self._failed[near] <= self._frame - self.config.redetect_cooldown)
                     & ~tracked[near]]
 
-    def _seen_near_places(self, seen: np.ndarray) -> None:
+    def margin_m(self) -> float:
+        """How far beyond its images' spread a point is searched from (SIFT: ``SEEN_MARGIN_M``)."""
+        return SEEN_MARGIN_M
+
+    def _seen_near_places(self, seen: np.ndarray, margin: float) -> None:
         """For each position of the pose space, the points seen from near it (once).
 
-        A point qualifies at a position within its images' spread plus ``SEEN_MARGIN_M``
-        of their centre; each position keeps its ``_NEAREST`` nearest-seen points.
+        A point qualifies at a position within its images' spread plus ``margin`` of
+        their centre; each position keeps its ``_NEAREST`` nearest-seen points.
         """
         places = np.unique(np.round(np.asarray(self.index.xy, float), 6), axis=0)
         self._places = cKDTree(places)
-        lists = self._places.query_ball_point(seen[:, :2], seen[:, 2] + SEEN_MARGIN_M)
+        lists = self._places.query_ball_point(seen[:, :2], seen[:, 2] + margin)
         point = np.repeat(np.arange(len(seen)), [len(x) for x in lists])
         place = np.concatenate([np.asarray(x, np.int64) for x in lists]) if len(point) \
             else np.zeros(0, np.int64)

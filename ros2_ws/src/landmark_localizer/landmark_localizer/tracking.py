@@ -105,7 +105,8 @@ class Tracker:
         self.config = config
         old = self.scene.config
         if (config.scene_tracks > 0) != (old.scene_tracks > 0) or \
-                config.scene_patch_px != old.scene_patch_px:
+                config.scene_patch_px != old.scene_patch_px or \
+                config.scene_patch_margin_m != old.scene_patch_margin_m:
             self.scene = scene_tracker(self.index, config, self.detector)  # a new birth set
         self.scene.config = config
         window = config.lk_window
