@@ -51,6 +51,20 @@ def test_points_that_disagree_with_the_prediction_decide_alone(
     np.testing.assert_array_equal(
         refinement.refine_on_points(index, ids, uv, seed, config, motion_prior=near)
         .estimate.pose, kept.estimate.pose)
+    # A measuring function is asked again where the gate drops the prior: first at the
+    # state the prior pulled, then at the points' own, where the pose is measured.
+    asked = []
+
+    def measure(state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        asked.append(np.array(state, float))
+        return np.zeros((0, 2)), np.zeros((0, 3))
+
+    monkeypatch.undo()
+    again = refinement.refine_on_points(index, ids, uv, seed, config, motion_prior=far,
+                                        scene=measure)
+    assert len(asked) == 2
+    assert np.hypot(*(asked[1][:2] - truth[:2])) < 0.04 < np.hypot(*(asked[0][:2] - truth[:2]))
+    np.testing.assert_allclose(again.estimate.pose, found.estimate.pose, atol=1e-12)
     # A yaw across +-pi is a small offset, not a full turn.
     assert refinement._prior_distance(np.array([0.0, 0.0, math.pi - 0.01]),
                                       (np.array([0.0, 0.0, -math.pi + 0.01]), spread)) < 2.0

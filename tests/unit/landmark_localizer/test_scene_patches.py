@@ -12,6 +12,7 @@ from landmark_db.database import ScenePoints
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.index import DatabaseIndex
+from landmark_localizer.map_search import MapSearch
 from landmark_localizer.scene_patches import PatchTracks, affine_maps, scene_tracker
 from landmark_localizer.scene_tracks import SceneTracks
 from vbn_common.features import SiftConfig
@@ -154,5 +155,9 @@ def test_points_with_a_patch_are_measured_from_farther_than_a_sift_search(world)
     tracker = Tracker(index, LocalizerConfig(scene_tracks=40), SiftConfig().create())
     tracker.set_config(LocalizerConfig(scene_tracks=40, scene_patch_margin_m=0.6))
     assert len(tracker.scene._candidates(beyond)) == len(xyz)
+    search = MapSearch(index, LocalizerConfig(scene_tracks=40))
+    assert len(search.patches._candidates(beyond)) == 0
+    search.set_config(LocalizerConfig(scene_tracks=40, scene_patch_margin_m=0.6))
+    assert len(search.patches._candidates(beyond)) == len(xyz)
     with pytest.raises(LocalizerError, match='scene_patch_margin_m'):
         LocalizerConfig(scene_patch_margin_m=-0.1)

@@ -53,8 +53,9 @@ class MapSearch:
         self.patches = self._tracker(config)
 
     def set_config(self, config: LocalizerConfig) -> None:
-        """Use new settings (a new patch tracker only when scene points turn on or off)."""
-        if (config.scene_tracks > 0) != (self.config.scene_tracks > 0):
+        """Use new settings (a new patch tracker on a change of scene points or margin)."""
+        if (config.scene_tracks > 0) != (self.config.scene_tracks > 0) or \
+                config.scene_patch_margin_m != self.config.scene_patch_margin_m:
             self.patches = self._tracker(config)
         elif self.patches is not None:
             self.patches.config = _widened(config)

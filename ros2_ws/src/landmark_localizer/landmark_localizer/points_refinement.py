@@ -174,9 +174,12 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     by. ``scene``: ``(uv, xyz)`` of scene points measured in the frame
     (:mod:`.scene_tracks`), or a function measuring them from a camera state
     (:data:`SceneMeasure`), which is then asked at the state the tracked features'
-    points give, tilt and height included (not at the seed's: a two-view pose 8 cm and
-    2 degrees off predicted the points beyond their search, and a third of them were
-    measured); those within ``absolute_threshold_px``
+    points give with the motion prior, tilt and height included (not at the seed's: a
+    two-view pose 8 cm and 2 degrees off predicted the points beyond their search, and a
+    third of them were measured), and again at their state without it where the gate
+    drops the prior; it is not asked where the seed is returned before that refinement
+    (the scene tracker then neither prunes nor births that frame). Those within
+    ``absolute_threshold_px``
     of that pose join its final refinement (they never judge the seed). The
     refinement's Huber threshold is ``absolute_huber_px``. ``tracked_weight``: the
     weight of a tracked feature's point beside a scene point's in that refinement
@@ -206,8 +209,9 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     state, _ = found
     first, inliers = inliers, _state_errors(state, rays, points) <= threshold
     rays, points = rays[inliers], points[inliers]
-    if callable(scene):
-        scene = scene(state.copy())
+    measure = scene if callable(scene) else None
+    if measure is not None:
+        scene = measure(state.copy())
     scene_rays = scene_xyz = np.zeros((0, 3))
     if scene is not None and len(scene[0]):
         scene_rays = base_rays(index.frame_camera.unproject(np.asarray(scene[0], float)))
@@ -246,8 +250,8 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
         # a 2 Hz pose settled 22 cm off claiming 1.8 cm, where the points alone gave
         # 0.3 cm (room, wheels slipping and odometry dropping out).
         # Alone they may not stand (too narrow or too few once re-selected): the seed.
-        alone = refine_on_points(index, class_ids, uv, seed, config, strict, None, scene,
-                                 tracked_weight)
+        alone = refine_on_points(index, class_ids, uv, seed, config, strict, None,
+                                 scene if measure is None else measure, tracked_weight)
         return alone if alone is not None else seed
     est = seed.estimate
     estimate = PoseEstimate(float(state[0]), float(state[1]), float(state[2]),

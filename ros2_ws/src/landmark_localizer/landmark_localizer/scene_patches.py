@@ -57,11 +57,12 @@ def scene_tracker(index: DatabaseIndex, config: LocalizerConfig, detector: objec
 
 def affine_maps(index: DatabaseIndex, camera_pose: np.ndarray, xyz: np.ndarray,
                 axes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Project points and their patch axes by a planar camera pose.
+    """Project points and their patch axes by a camera pose.
 
     Args:
         index: The database index (the frame camera).
-        camera_pose: ``(x, y, yaw)`` of the camera.
+        camera_pose: ``(x, y, yaw)`` of the camera, or ``(x, y, yaw, pitch, roll, dz)``
+            with the frame's tilt and height offset (:meth:`.DatabaseIndex.project_points`).
         xyz: ``(n, 3)`` the points.
         axes: ``(n, 2, 3)`` their patch axes (one patch pixel right, one down).
 
