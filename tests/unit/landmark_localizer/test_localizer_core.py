@@ -381,3 +381,33 @@ def test_refuted_votes_leave_the_frames_lost_and_the_absolute_pose_is_solved_onc
     monkeypatch.setattr(loc, '_track', lambda image, frame: (None, 0, True))   # features lost
     estimate = loc.step(Frame(3 * 10**8, image))
     assert (loc.state, len(solved)) == ('LOST', 3)
+
+
+def test_a_vote_is_polished_only_by_an_absolute_pose_it_agrees_with(world, monkeypatch) -> None:
+    """The absolute pose found near a vote polishes it where the two agree; a look-alike
+    70 cm off a vote with a 10 cm spread does not (a changed room): the frame's own
+    absolute pose does where it agrees, else the vote stays as it is."""
+    import landmark_localizer.localizer as localizer
+    from vbn_common.geometry.localize import PoseEstimate
+
+    _, index = world
+
+    def solution(x: float, std: float = 0.01) -> PoseSolution:
+        return PoseSolution(PoseEstimate(x, 1.5, 0.0, np.eye(3) * std ** 2, 0.5, 0.0, 2, True),
+                            np.zeros(0, np.int64), 2, 12, 0.3)
+
+    voted = solution(1.0, 0.1)
+    image = np.zeros((64, 64), np.uint8)
+    for near_x, own_x, expected in ((1.02, None, 1.02),    # agrees: polished
+                                    (1.7, 1.01, 1.01),     # a look-alike: the frame's own
+                                    (1.7, 1.8, 1.0),       # both refute it: the vote
+                                    (1.7, None, 1.0)):     # no own pose: the vote
+        loc = Localizer(index, LocalizerConfig())
+        monkeypatch.setattr(loc, '_vote_features', lambda image, full=False: (None, None))
+        monkeypatch.setattr(loc, '_scene_matches', lambda features: None)
+        monkeypatch.setattr(localizer, 'absolute_solution',
+                            lambda *args, x=near_x, **kwargs: solution(x))
+        loc._absolute_of = None if own_x is None else (solution(own_x),)
+        polished = loc._absolute_polish(image, voted)
+        assert polished.estimate.x == pytest.approx(expected)
+        assert (polished is voted) == (expected == 1.0)

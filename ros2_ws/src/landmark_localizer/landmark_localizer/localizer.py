@@ -52,7 +52,7 @@ from landmark_localizer.pose import (
 )
 from landmark_localizer.switching import MotionPredictor, TrackedCounts, choose_region
 from landmark_localizer.tracking import Tracker, Tracks
-from landmark_localizer.voting import Verified, refutes, verify, vote
+from landmark_localizer.voting import Verified, agreeing, refutes, verify, vote
 from vbn_common.features import SiftConfig, extract_features_scaled
 from vbn_common.geometry.frames import compose_poses
 
@@ -177,7 +177,7 @@ class Localizer:
         if event in _VOTED and self.state == TRACKING and solution is not None and \
                 self.config.absolute_min_inliers > 0:
             # The frame's matches to the class points pin a vote's pose better.
-            solution = self._absolute_polish(image, frame, solution)
+            solution = self._absolute_polish(image, solution)
         if self.state == LOST and self.config.absolute_min_inliers > 0:
             solution = self._absolute(image, frame)
             if solution is not None:
@@ -235,16 +235,16 @@ class Localizer:
                                                           self.config.vote_checks)
         return self._scene
 
-    def _absolute_polish(self, image: np.ndarray, frame: Frame, solution: PoseSolution
-                         ) -> PoseSolution:
-        """Return the vote's solution with the absolute pose near it, when one is found."""
+    def _absolute_polish(self, image: np.ndarray, solution: PoseSolution) -> PoseSolution:
+        """Return the vote's solution with an absolute pose it agrees with, if any."""
         features, nearest = self._vote_features(image)
-        found = absolute_solution(self.index, features, nearest, self.config, self.rng,
-                                  solution.estimate.pose, self._scene_matches(features))
+        found = agreeing(solution, absolute_solution(   # found near it, else the frame's own
+            self.index, features, nearest, self.config, self.rng, solution.estimate.pose,
+            self._scene_matches(features)), self._absolute_of and self._absolute_of[0])
         if found is None:
             return solution
-        polished = replace(solution, estimate=found.estimate, two_view=solution.two_view_pose)
-        self._last_solution = polished
+        self._last_solution = polished = replace(solution, estimate=found.estimate,
+                                                 two_view=solution.two_view_pose)
         self.camera_pose = found.estimate.pose
         return polished
 
