@@ -179,9 +179,8 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
     third of them were measured), and again at their state without it where the gate
     drops the prior; it is not asked where the seed is returned before that refinement
     (the scene tracker then neither prunes nor births that frame). Those within
-    ``absolute_threshold_px``
-    of that pose join its final refinement (they never judge the seed). The
-    refinement's Huber threshold is ``absolute_huber_px``. ``tracked_weight``: the
+    ``absolute_threshold_px`` of that pose join its final refinement (they never judge
+    the seed). The refinement's Huber threshold is ``absolute_huber_px``. ``tracked_weight``: the
     weight of a tracked feature's point beside a scene point's in that refinement
     (:class:`SourceBalance`); the solution reports both sources' errors there.
     """

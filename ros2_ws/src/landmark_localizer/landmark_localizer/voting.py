@@ -135,8 +135,8 @@ def agreeing(voted: PoseSolution, *poses: PoseSolution | None) -> PoseSolution |
         >>> from vbn_common.geometry.localize import PoseEstimate
         >>> def at(x): return PoseSolution(PoseEstimate(x, 0.0, 0.0, np.eye(3) * 1e-4,
         ...                                             0.5, 0.0, 2, True), np.zeros(0), 2, 9, 0.3)
-        >>> [p.estimate.x for p in (agreeing(at(0.0), at(0.7), None, at(0.01)),)]
-        [0.01]
+        >>> agreeing(at(0.0), at(0.7), None, at(0.01)).estimate.x
+        0.01
         >>> agreeing(at(0.0), at(0.7)) is None, agreeing(at(0.0)) is None
         (True, True)
     """
