@@ -413,6 +413,34 @@ def test_a_vote_is_polished_only_by_an_absolute_pose_it_agrees_with(world, monke
         assert (polished is voted) == (expected == 1.0)
 
 
+def test_a_level_fit_skips_the_tilt_and_a_raised_camera_takes_it(world, monkeypatch) -> None:
+    import landmark_localizer.pose as pose_module
+    points, index = world
+    truth = np.array([1.7, 1.1, -0.4])
+    start = truth + np.array([0.03, -0.02, math.radians(1.0)])
+    calls = []
+
+    def counting(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        calls.append(1)
+        return pose_module.refine_tilted.__wrapped__(*args, **kwargs)
+
+    counting.__wrapped__ = pose_module.refine_tilted
+    monkeypatch.setattr(pose_module, 'refine_tilted', counting)
+    ids, uv = current_tracks(points, truth, 0.3, np.random.default_rng(4))
+    level = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig())
+    assert level is not None and not calls          # 0.3 px of noise: nothing to gain
+    assert np.hypot(*(level.estimate.pose[:2] - truth[:2])) < 0.005
+    # The camera 5 cm higher than the exploration's (the points 5 cm lower to it).
+    ids, uv = current_tracks(points - [0.0, 0.0, 0.05], truth, 0.3, np.random.default_rng(4))
+    raised = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig())
+    planar = refine_pose(index, index.regions[0], ids, uv, start,
+                         LocalizerConfig(tilt_prior_deg=0.0))
+    assert len(calls) == 1 and raised is not None
+    assert np.hypot(*(raised.estimate.pose[:2] - truth[:2])) < 0.005
+    # Kept level, the same points fit no pose within max_residual_px.
+    assert planar is None
+
+
 def test_a_judged_vote_keeps_its_pose_unless_its_points_also_judge_the_polish(
         world, monkeypatch) -> None:
     """Tracking starts from a vote polished on full-size keypoints by the two-view
