@@ -163,17 +163,16 @@ def _correlations(crops: np.ndarray, at: np.ndarray, templates: np.ndarray, side
     if not n:
         return np.zeros(0)
     lo = (tile - side) // 2
-    span = np.arange(side) - side // 2
     base = np.floor(at)
     fx, fy = (at - base).T
-    x = np.clip(base[:, 0, None] + span, 0, tile - 2).astype(np.int64)   # (n, side)
-    y = np.clip(base[:, 1, None] + span, 0, tile - 2).astype(np.int64)
-    rows = np.arange(n)[:, None, None]
-    yy, xx = y[:, :, None], x[:, None, :]
-    sample = (crops[rows, yy, xx] * ((1 - fx) * (1 - fy))[:, None, None]
-              + crops[rows, yy, xx + 1] * (fx * (1 - fy))[:, None, None]
-              + crops[rows, yy + 1, xx] * ((1 - fx) * fy)[:, None, None]
-              + crops[rows, yy + 1, xx + 1] * (fx * fy)[:, None, None]).reshape(n, -1)
+    # One gather of each square and its next row and column, then the bilinear blend.
+    reach = np.arange(side + 1) - side // 2
+    x = np.clip(base[:, 0, None] + reach, 0, tile - 1).astype(np.int64)   # (n, side + 1)
+    y = np.clip(base[:, 1, None] + reach, 0, tile - 1).astype(np.int64)
+    block = crops[np.arange(n)[:, None, None], y[:, :, None], x[:, None, :]]
+    fx, fy = fx[:, None, None], fy[:, None, None]
+    across = block[:, :, :-1] * (1 - fx) + block[:, :, 1:] * fx
+    sample = (across[:, :-1] * (1 - fy) + across[:, 1:] * fy).reshape(n, -1)
     ref = templates[:, lo:lo + side, lo:lo + side].reshape(n, -1)
     a = sample - sample.mean(axis=1, keepdims=True)
     b = ref - ref.mean(axis=1, keepdims=True)
