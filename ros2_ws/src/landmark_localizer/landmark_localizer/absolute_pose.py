@@ -204,7 +204,8 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     frame wherever the points leave a direction to the prior.
 
     Args:
-        pose: (3,) starting camera pose.
+        pose: (3,) starting camera pose, or (6,) a starting state with its tilt and
+            height offset (where a refinement on some of the points found them).
         rays: (n, 3) unit rays in the camera's level base frame.
         points: (n, 3) their points.
         threshold: Huber threshold, radians.
@@ -220,7 +221,7 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
             less); the rays' noise is then that of a ray of weight 1, the RMS of the
             weighted squared errors. None: all 1.
     """
-    state = np.concatenate([np.asarray(pose, float), np.zeros(3)])
+    state = np.concatenate([np.asarray(pose, float), np.zeros(3)])[:6]
     free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])
     prior = np.array([0, 0, 0, tilt_prior, tilt_prior, height_prior], float)
     centre = np.zeros(6)
