@@ -191,3 +191,28 @@ def test_the_absolute_pose_is_searched_near_the_odometrys_prediction() -> None:
                                                mount)
     np.testing.assert_allclose(camera, [0.8, 0.0, 0.0])
     assert same_turn == turn and wider == pytest.approx(radius + 0.3 * turn)
+
+
+def test_the_intersection_tries_the_eleven_weights_at_once_or_one_by_one() -> None:
+    """The batched inverses give the weight-by-weight search's result; where one mix is
+    singular (an indefinite covariance: the mix at w = 0.5 is) the rest still count."""
+    from landmark_localizer.bridging import _intersection
+
+    def by_hand(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        best = a
+        for w in np.linspace(0.0, 1.0, 11):
+            mix = w * np.linalg.inv(a) + (1 - w) * np.linalg.inv(b)
+            if abs(np.linalg.det(mix)) < 1e-12:
+                continue
+            joined = np.linalg.inv(mix)
+            if np.trace(joined[:2, :2]) < np.trace(best[:2, :2]):
+                best = joined
+        return 0.5 * (best + best.T)
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        m, n = rng.normal(size=(2, 3, 3))
+        a, b = m @ m.T + 0.01 * np.eye(3), n @ n.T + 0.01 * np.eye(3)
+        np.testing.assert_allclose(_intersection(a, b), by_hand(a, b), rtol=1e-9, atol=1e-15)
+    a, b = np.eye(3), np.diag([1.0, 1.0, -1.0])
+    np.testing.assert_allclose(_intersection(a, b), by_hand(a, b))

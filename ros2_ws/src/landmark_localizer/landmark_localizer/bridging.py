@@ -300,13 +300,22 @@ def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         inverse_a, inverse_b = np.linalg.inv(a), np.linalg.inv(b)
     except np.linalg.LinAlgError:
         return 0.5 * (b + b.T)   # a degenerate image covariance claims nothing to keep
+    weights = np.linspace(0.0, 1.0, 11)[:, None, None]
+    try:   # the eleven weights at once; one by one where one of them is singular
+        joined = list(np.linalg.inv(weights * inverse_a + (1.0 - weights) * inverse_b))
+    except np.linalg.LinAlgError:
+        joined = [_inverse(w * inverse_a + (1.0 - w) * inverse_b) for w in weights]
     best = a
-    for w in np.linspace(0.0, 1.0, 11):
-        try:
-            joined = np.linalg.inv(w * inverse_a + (1.0 - w) * inverse_b)
-        except np.linalg.LinAlgError:
-            continue
-        if np.trace(joined[:2, :2]) < np.trace(best[:2, :2]):
-            best = joined
+    for candidate in joined:
+        if candidate is not None and np.trace(candidate[:2, :2]) < np.trace(best[:2, :2]):
+            best = candidate
     return 0.5 * (best + best.T)
+
+
+def _inverse(matrix: np.ndarray) -> np.ndarray | None:
+    """Return the inverse of ``matrix``, or None where it is singular."""
+    try:
+        return np.linalg.inv(matrix)
+    except np.linalg.LinAlgError:
+        return None
 
