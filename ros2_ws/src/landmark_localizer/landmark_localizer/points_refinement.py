@@ -37,12 +37,6 @@ __all__ = ['BALANCE_POINTS', 'BALANCE_RANGE', 'SceneMeasure', 'SourceBalance', '
 #: ``(uv, xyz)``.
 SceneMeasure = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
-#: Gauss-Newton steps of the refinement on the tracked features' points alone, which
-#: only says where to measure the scene points and which tracked points to keep: from a
-#: two-view seed 8 cm and 2 degrees off, three steps come within a millimetre, and the
-#: refinement on all the points goes on from there (on the room run it took six steps
-#: on average, eight at the cap on one frame in twelve).
-FIRST_ITERATIONS = 3
 #: Least points of each source for a frame to measure their errors.
 BALANCE_POINTS = 5
 #: The tracked features' weight beside the scene points' stays within this range.
@@ -208,8 +202,7 @@ def refine_on_points(index: DatabaseIndex, class_ids: np.ndarray, uv: np.ndarray
         return seed
     args = (config.absolute_huber_px / focal, 0.5 / focal, tilt_prior, config.height_prior_m,
             8, motion_prior)
-    found = refine_absolute(start, rays[inliers], points[inliers], *args[:4],
-                            FIRST_ITERATIONS, motion_prior)
+    found = refine_absolute(start, rays[inliers], points[inliers], *args)
     if found is None:
         return seed
     state, _ = found
