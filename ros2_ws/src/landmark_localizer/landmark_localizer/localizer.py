@@ -289,9 +289,8 @@ class Localizer:
             polished = refine_pose(self.index, region, tracks.class_ids, uv,
                                    solution.estimate.pose, self.config)
             if polished is not None and found.judged:  # the points judge the polish too
-                checked = refine_on_points(self.index, tracks.class_ids, uv, polished,
-                                           self.config, strict=True)
-                polished = checked if checked is not polished else None  # else: unjudged
+                polished = refine_on_points(self.index, tracks.class_ids, uv, polished,
+                                            self.config, strict=True)
             solution = polished or solution
         self._last_solution = solution
         self._failures = 0
