@@ -440,30 +440,3 @@ def test_a_level_fit_skips_the_tilt_and_a_raised_camera_takes_it(world, monkeypa
     # Kept level, the same points fit no pose within max_residual_px.
     assert planar is None
 
-
-def test_a_judged_vote_keeps_its_pose_unless_its_points_also_judge_the_polish(
-        world, monkeypatch) -> None:
-    """Tracking starts from a vote polished on full-size keypoints by the two-view
-    refinement; a vote its class points judged takes the polish only as their seed: a
-    polish 60 cm off (a camera 4 cm lower than explored, kept level) is refused by
-    them, one 2 cm off is pulled back onto the truth, and an unjudged vote takes it."""
-    import landmark_localizer.localizer as localizer
-    from landmark_localizer.voting import Verified
-    from vbn_common.geometry.localize import PoseEstimate
-
-    points, index = world
-    truth = np.array([1.7, 1.1, -0.4])
-    ids, uv = current_tracks(points, truth)
-
-    def solution(pose: np.ndarray) -> PoseSolution:
-        return PoseSolution(PoseEstimate(*pose, np.eye(3) * 1e-6, 0.5, 0.0, 3, True),
-                            ids, 3, len(ids), 0.3)
-
-    image = np.zeros((240, 320), np.uint8)
-    for judged, polish_dx, expected_dx in ((True, 0.6, 0.0), (True, 0.02, 0.0),
-                                           (False, 0.6, 0.6)):
-        loc = Localizer(index, LocalizerConfig(vote_scale=0.5))
-        monkeypatch.setattr(localizer, 'refine_pose', lambda *args, d=polish_dx, **kwargs:
-                            solution(truth + [d, 0.0, 0.0]))
-        loc._start(Verified(0, solution(truth), ids, uv, judged), Frame(0, image))
-        assert loc.camera_pose == pytest.approx(truth + [expected_dx, 0.0, 0.0], abs=1e-6)

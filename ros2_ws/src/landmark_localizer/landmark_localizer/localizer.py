@@ -108,12 +108,15 @@ class Localizer:
     # -- control --------------------------------------------------------------------------
     def reset(self) -> None:
         """Forget the region (and any /initialpose hint): vote globally on the next frame."""
-        self.state, self.region, self.camera_pose, self.hint = LOST, -1, None, None
+        self.state, self.region, self.camera_pose = LOST, -1, None
+        self.hint = None
         self.tracker.reset()
         self.predictor.reset()
         self.bridge.reset()
         self.map_search.reset()
-        self._failures, self._handover, self._last_camera = 0, -1, None
+        self._failures = 0
+        self._handover = -1
+        self._last_camera = None
         self.stats.resets += 1
 
     def set_config(self, config: LocalizerConfig) -> None:
@@ -136,7 +139,9 @@ class Localizer:
     def set_hint(self, x: float, y: float, radius: float | None = None) -> None:
         """Restrict the next votes to regions near ``(x, y)`` (``/initialpose``)."""
         self.hint = (np.array([x, y], float), radius or self.config.hint_radius_m)
-        self.state, self.region, self._handover, self._last_camera = LOST, -1, -1, None
+        self.state, self.region = LOST, -1
+        self._handover = -1
+        self._last_camera = None
         self.tracker.reset()
         self.bridge.reset()
 
@@ -285,12 +290,9 @@ class Localizer:
             radius = 1.0 / self.config.vote_scale + 1.0
             tracks = self._reanchor(np.asarray(frame.image), tracks,
                                     np.arange(len(tracks)), radius)
-            uv = tracks.uv.astype(float)
-            polished = refine_pose(self.index, region, tracks.class_ids, uv,
-                                   solution.estimate.pose, self.config)
-            if polished is not None and found.judged:  # the points judge the polish too
-                polished = refine_on_points(self.index, tracks.class_ids, uv, polished,
-                                            self.config, strict=True)
+            polished = refine_pose(self.index, region, tracks.class_ids,
+                                   tracks.uv.astype(float), solution.estimate.pose,
+                                   self.config)
             solution = polished or solution
         self._last_solution = solution
         self._failures = 0
