@@ -292,7 +292,7 @@ class Localizer:
                                     np.arange(len(tracks)), radius)
             polished = refine_pose(self.index, region, tracks.class_ids,
                                    tracks.uv.astype(float), solution.estimate.pose,
-                                   self.config)
+                                   self.config, tilt_always=True)
             solution = polished or solution
         self._last_solution = solution
         self._failures = 0
