@@ -427,16 +427,18 @@ def test_a_level_fit_skips_the_tilt_and_a_raised_camera_takes_it(world, monkeypa
     counting.__wrapped__ = pose_module.refine_tilted
     monkeypatch.setattr(pose_module, 'refine_tilted', counting)
     ids, uv = current_tracks(points, truth, 0.3, np.random.default_rng(4))
-    level = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig())
+    level = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig(),
+                        level_gate=True)
     assert level is not None and not calls          # 0.3 px of noise: nothing to gain
     assert np.hypot(*(level.estimate.pose[:2] - truth[:2])) < 0.005
-    asked = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig(),
-                        tilt_always=True)                # a vote's polish tries it anyway
+    asked = refine_pose(index, index.regions[0], ids, uv, start,
+                        LocalizerConfig())               # a vote's polish tries it anyway
     assert len(calls) == 1 and asked is not None
     calls.clear()
     # The camera 5 cm higher than the exploration's (the points 5 cm lower to it).
     ids, uv = current_tracks(points - [0.0, 0.0, 0.05], truth, 0.3, np.random.default_rng(4))
-    raised = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig())
+    raised = refine_pose(index, index.regions[0], ids, uv, start, LocalizerConfig(),
+                         level_gate=True)
     planar = refine_pose(index, index.regions[0], ids, uv, start,
                          LocalizerConfig(tilt_prior_deg=0.0))
     assert len(calls) == 1 and raised is not None

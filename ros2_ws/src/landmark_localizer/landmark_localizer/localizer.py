@@ -292,7 +292,7 @@ class Localizer:
                                     np.arange(len(tracks)), radius)
             polished = refine_pose(self.index, region, tracks.class_ids,
                                    tracks.uv.astype(float), solution.estimate.pose,
-                                   self.config, tilt_always=True)
+                                   self.config)
             solution = polished or solution
         self._last_solution = solution
         self._failures = 0
@@ -388,7 +388,7 @@ class Localizer:
         solution = None
         if predicted is not None:
             solution = refine_pose(self.index, region, tracks.class_ids,
-                                   tracks.uv.astype(float), predicted, config)
+                                   tracks.uv.astype(float), predicted, config, level_gate=True)
         if solution is None:
             solution = solve_pose(self.index, region, tracks.class_ids,
                                   tracks.uv.astype(float), config, self.rng, predicted)

@@ -248,7 +248,7 @@ def _residuals_and_jacobian(pose: np.ndarray, data: _Correspondences, step: np.n
 
 def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
                 uv: np.ndarray, initial: np.ndarray, config: LocalizerConfig,
-                iterations: int = 8, tilt_always: bool = False) -> PoseSolution | None:
+                iterations: int = 8, level_gate: bool = False) -> PoseSolution | None:
     """Polish the camera pose on the epipolar errors of every model view at once.
 
     The per-view solve of Section 7.5 followed by the intersection of 7.4 treats each
@@ -263,10 +263,12 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     weighted residuals' variance ``s^2`` (floored at 0.1 px): large along the line
     through two views when the robot stands on it.
 
-    The frame's own tilt and height are tried (``tilt_prior_deg``) where the level fit
-    leaves them something to gain (:data:`LEVEL_SHARE`), or always with ``tilt_always``:
-    a vote's polish, once, where nothing checks the start (from a vote 7 mm off on a
-    camera 4 cm lower than explored, a level fit within the gate converged 66 cm off).
+    The frame's own tilt and height are tried (``tilt_prior_deg``) on every call, or with
+    ``level_gate`` only where the level fit leaves them something to gain
+    (:data:`LEVEL_SHARE`): a tracked frame's seed, which the points' refinement checks
+    and finds the tilt of. Not a vote's polish, once a start, where nothing checks it
+    (from a vote 7 mm off on a camera 4 cm lower than explored, a level fit within the
+    gate converged 66 cm off).
 
     Returns:
         The solution, or None when fewer than two views have ``min_inliers`` inliers,
@@ -279,8 +281,8 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
     threshold = 0.75 * config.max_residual_px / focal
     planar = _refine_planar(np.asarray(initial, float), data, threshold, iterations)
     tilt = False
-    if config.tilt_prior_deg > 0 and (tilt_always or
-                                      not _level_enough(planar, threshold, focal)):
+    if config.tilt_prior_deg > 0 and not (level_gate and
+                                          _level_enough(planar, threshold, focal)):
         # The frame's pitch, roll and height with the pose (tilt_refinement), taken
         # when it explains the points markedly better than the planar pose: three
         # more unknowns cost a level camera accuracy (the room run: p95 3.0 -> 3.8 cm).
