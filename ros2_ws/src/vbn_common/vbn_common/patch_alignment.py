@@ -71,16 +71,30 @@ def warp_patches(patches: np.ndarray, maps: np.ndarray, tile: int) -> np.ndarray
     Returns:
         ``(n, tile, tile)`` float32: the patch centre at the tile's centre.
     """
-    centre = (patches.shape[1] - 1) / 2
+    n, side = patches.shape[:2]
+    if not n:
+        return np.zeros((0, tile, tile), np.float32)
+    # Each tile pixel's patch pixel by the inverse map (a singular map samples the
+    # patch's centre everywhere), clamped to the patch: a replicated border.
     maps = np.asarray(maps, np.float64)
-    matrices = np.concatenate([maps, (tile // 2 - maps.sum(axis=2) * centre)[:, :, None]],
-                              axis=2)
-    out = np.empty((len(patches), tile, tile), np.float32)
-    size, flags, border = (tile, tile), cv2.INTER_LINEAR, cv2.BORDER_REPLICATE
-    for i in range(len(patches)):
-        out[i] = cv2.warpAffine(patches[i], matrices[i], size, flags=flags,
-                                borderMode=border)
-    return out
+    det = maps[:, 0, 0] * maps[:, 1, 1] - maps[:, 0, 1] * maps[:, 1, 0]
+    scale = np.divide(1.0, det, out=np.zeros_like(det), where=det != 0)
+    inverse = (np.stack([maps[:, 1, 1], -maps[:, 0, 1], -maps[:, 1, 0], maps[:, 0, 0]], 1)
+               * scale[:, None]).astype(np.float32)[:, :, None, None]
+    step = np.arange(tile, dtype=np.float32) - tile // 2
+    right, down = step[None, None, :], step[None, :, None]
+    centre = (side - 1) / 2
+    source = np.empty((n, tile, tile, 2), np.float32)
+    np.clip(inverse[:, 0] * right + (inverse[:, 1] * down + centre), 0, side - 1,
+            out=source[..., 0])
+    np.clip(inverse[:, 2] * right + (inverse[:, 3] * down + centre), 0, side - 1,
+            out=source[..., 1])
+    source[..., 1] += (np.arange(n, dtype=np.float32) * side)[:, None, None]
+    # One remap over the patches stacked in a column: one call instead of one a patch.
+    out = cv2.remap(np.ascontiguousarray(patches).reshape(n * side, side),
+                    source.reshape(n * tile, tile, 2), None, cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.reshape(n, tile, tile).astype(np.float32)
 
 
 def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: np.ndarray,
