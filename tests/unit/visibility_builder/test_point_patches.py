@@ -7,7 +7,12 @@ import pytest
 from vbn_common.geometry.camera import make_camera
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.point_patches import choose_patch_views, patch_axes, point_patches
+from visibility_builder.point_patches import (
+    MIN_FACING_COS,
+    choose_patch_views,
+    patch_axes,
+    point_patches,
+)
 from visibility_builder.scene_points import PointsConfig
 
 
@@ -50,6 +55,33 @@ def test_the_axes_move_the_projection_one_pixel() -> None:
         down = _pixel(camera, points[i] + axes[i, 1], poses[i])
         np.testing.assert_allclose(right - uv[i], [1.0, 0.0], atol=2e-3)
         np.testing.assert_allclose(down - uv[i], [0.0, 1.0], atol=2e-3)
+
+
+def test_axes_on_a_given_surface_by_hand() -> None:
+    # The pinhole of test_pinhole_axes_by_hand, 2 m from a wall turned 45 degrees about
+    # the vertical (normal (1, 1, 0) / sqrt 2): one pixel right (-y on the facing plane,
+    # 2/320 m) meets the wall 2/320 m further along x as well; one down stays vertical.
+    camera = make_camera('pinhole', 640, 480, hfov_deg=90)
+    point, uv = np.array([[2.0, 0.0, 0.0]]), np.array([[319.5, 239.5]])
+    normal = np.array([[1.0, 1.0, 0.0]]) / np.sqrt(2)
+    axes = patch_axes(point, np.zeros((1, 3)), uv, camera, normal).astype(float)
+    step = 2 / 320
+    np.testing.assert_allclose(axes[0, 1], [0.0, 0.0, -step], atol=1e-6)
+    right = axes[0, 0]
+    assert abs(right @ normal[0]) < 1e-6                 # on the wall
+    np.testing.assert_allclose(right[1] / right[0], -1.0, rtol=1e-3)
+    np.testing.assert_allclose(_pixel(camera, point[0] + right, np.zeros(3)) - uv[0],
+                               [1.0, 0.0], atol=1e-3)
+    # Either sign of the normal is the same plane; a NaN normal, or a wall seen nearer
+    # grazing than MIN_FACING_COS, keeps the plane facing the camera.
+    np.testing.assert_allclose(patch_axes(point, np.zeros((1, 3)), uv, camera, -normal),
+                               axes, atol=1e-9)
+    facing = patch_axes(point, np.zeros((1, 3)), uv, camera)
+    grazing = np.array([[np.cos(np.radians(80)), np.sin(np.radians(80)), 0.0]])
+    for unusable in (np.full((1, 3), np.nan), grazing):
+        np.testing.assert_array_equal(patch_axes(point, np.zeros((1, 3)), uv, camera,
+                                                 unusable), facing)
+    assert np.cos(np.radians(80)) < MIN_FACING_COS < np.cos(np.radians(45))
 
 
 def test_the_patch_view_is_nearest_where_the_point_was_seen_from() -> None:
@@ -147,3 +179,10 @@ def test_a_point_off_along_its_patch_view_ray_is_triangulated_where_its_patch_is
                                          np.arange(2), poses, camera, lambda i: images[i],
                                          min_views=3)
     assert found.tolist() == [2] and np.array_equal(kept, guess)
+
+
+@pytest.mark.parametrize('radius', [-0.1, float('nan'), True, '0.3'])
+def test_patch_normal_radius_is_checked(radius) -> None:
+    with pytest.raises(VisibilityBuilderError, match='patch_normal_radius_m'):
+        PointsConfig(patch_normal_radius_m=radius)
+    assert PointsConfig(patch_normal_radius_m=0).patch_normal_radius_m == 0

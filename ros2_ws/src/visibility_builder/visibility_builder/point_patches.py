@@ -17,9 +17,10 @@ For each point:
    image is not a patch view;
 2. the ``s x s`` patch, bilinearly sampled around the point's reprojection in that view
    (``cv2.getRectSubPix``), so its centre pixel *is* the point;
-3. its **axes**: the 3-D offsets from the point, on the plane through it that faces the
-   patch view's camera, whose projections move one patch pixel right and one down.
-   With them a frame's pose predicts the patch's affine warp in that frame.
+3. its **axes**: the 3-D offsets from the point, on the surface's plane through it
+   where the neighbouring points fix one (:mod:`.surface_normals`), else on the plane
+   facing the patch view's camera, whose projections move one patch pixel right and one
+   down. With them a frame's pose predicts the patch's affine warp in that frame.
 
 A point with no patch view keeps no patch. Cost: one decode per patch view image and a
 few vectorised passes (about 0.3 s on the room's 200 panoramas).
@@ -38,8 +39,13 @@ from vbn_common.images import ImageDecodeError, decode_image
 from vbn_common.patch_alignment import align_patches, patch_maps
 from visibility_builder.verification import map_rays
 
-__all__ = ['choose_patch_views', 'patch_axes', 'patch_sources', 'point_patches',
-           'triangulate_on_patches']
+__all__ = ['MIN_FACING_COS', 'choose_patch_views', 'patch_axes', 'patch_sources',
+           'point_patches', 'triangulate_on_patches']
+
+#: A surface normal is used for a patch's axes only where the patch view sees the surface
+#: within about 72 degrees of face on (its cosine): nearer grazing, a few millimetres of
+#: the fitted plane's error stretch the axes by a pixel.
+MIN_FACING_COS = 0.3
 
 
 def patch_sources(frames: Sequence[Any]) -> tuple[Callable[[int], np.ndarray | None],
@@ -118,7 +124,7 @@ def choose_patch_views(points: np.ndarray, member_point: np.ndarray,
 
 
 def patch_axes(points: np.ndarray, camera_poses: np.ndarray, uv: np.ndarray,
-               camera: CameraModel) -> np.ndarray:
+               camera: CameraModel, normals: np.ndarray | None = None) -> np.ndarray:
     """Step 3: the 3-D offsets that move each point's projection one pixel right and down.
 
     Args:
@@ -126,6 +132,10 @@ def patch_axes(points: np.ndarray, camera_poses: np.ndarray, uv: np.ndarray,
         camera_poses: ``(n, 3)`` the camera ``(x, y, heading)`` each point is seen from.
         uv: ``(n, 2)`` the point's pixel in that camera.
         camera: the camera as mounted.
+        normals: ``(n, 3)`` the surface's normal at each point
+            (:func:`.surface_normals.surface_normals`; NaN: unknown), or None. The axes
+            lie on that plane where it is known and faces the camera at least
+            :data:`MIN_FACING_COS`, else on the plane facing the camera.
 
     Returns:
         ``(n, 2, 3)`` float32: row 0 the offset for one pixel right, row 1 one pixel down;
@@ -135,25 +145,30 @@ def patch_axes(points: np.ndarray, camera_poses: np.ndarray, uv: np.ndarray,
     points = np.asarray(points, float)
     pose = np.asarray(camera_poses, float)
     centre = np.column_stack([pose[:, :2], np.zeros(n)])
-    normal = points - centre
-    depth = np.linalg.norm(normal, axis=1)
-    normal /= np.maximum(depth, 1e-12)[:, None]
+    plane = points - centre
+    plane /= np.maximum(np.linalg.norm(plane, axis=1), 1e-12)[:, None]
+    if normals is not None:
+        normals = np.asarray(normals, float).reshape(n, 3)
+        facing = np.einsum('ij,ij->i', np.nan_to_num(normals), plane)
+        use = np.all(np.isfinite(normals), axis=1) & (np.abs(facing) >= MIN_FACING_COS)
+        plane[use] = normals[use] * np.sign(facing[use])[:, None]
+    reach = np.einsum('ij,ij->i', points - centre, plane)
     out = np.full((n, 2, 3), np.nan, np.float32)
     for axis in range(2):
         shifted = np.asarray(uv, float).copy()
         shifted[:, axis] += 1.0
         rays = map_rays(camera.unproject(shifted), pose[:, 2])
-        along = np.einsum('ij,ij->i', rays, normal)
+        along = np.einsum('ij,ij->i', rays, plane)
         ok = along > 1e-6
-        t = np.where(ok, depth / np.where(ok, along, 1.0), np.nan)
+        t = np.where(ok, reach / np.where(ok, along, 1.0), np.nan)
         out[:, axis] = (centre + t[:, None] * rays - points).astype(np.float32)
     return out
 
 
 def point_patches(points: np.ndarray, view_image: np.ndarray, uv: np.ndarray,
                   camera_poses: np.ndarray, camera: CameraModel, size: int,
-                  decode: Callable[[int], np.ndarray | None]
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  decode: Callable[[int], np.ndarray | None],
+                  normals: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Cut each point's patch in its patch view, and its axes (steps 2 and 3).
 
     Args:
@@ -165,6 +180,8 @@ def point_patches(points: np.ndarray, view_image: np.ndarray, uv: np.ndarray,
         camera: the camera as mounted.
         size: the patch side (odd), pixels.
         decode: the grey image of an image index (None when it cannot be decoded).
+        normals: ``(n, 3)`` each point's surface normal (NaN: unknown) for its axes
+            (:func:`patch_axes`), or None: every patch on the plane facing its view.
 
     Returns:
         ``(patches (n, size, size) uint8, axes (n, 2, 3) float32)``: zero patches and NaN
@@ -178,7 +195,8 @@ def point_patches(points: np.ndarray, view_image: np.ndarray, uv: np.ndarray,
         return patches, axes
     pose = np.asarray(camera_poses, float)
     axes[with_view] = patch_axes(points[with_view], pose[view_image[with_view]],
-                                 uv[with_view], camera)
+                                 uv[with_view], camera,
+                                 None if normals is None else normals[with_view])
     cut = np.zeros(n, bool)
     for image in np.unique(view_image[with_view]):
         gray = decode(int(image))

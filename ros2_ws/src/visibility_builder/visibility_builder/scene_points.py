@@ -20,9 +20,10 @@ point. This step keeps those points, with one descriptor each, as
 4. its descriptor is the member nearest the members' mean;
 5. where it was seen from: the centre of its images' camera positions and the largest
    distance of one from it (the localizer searches a point only near there);
-6. its patch in one exploration image, and the patch's axes (:mod:`.point_patches`),
-   when the images are given, ``patch_px`` is not 0 and at least ``patch_min_views``
-   images see it; such a point is triangulated again where its patch is found.
+6. its patch in one exploration image, and the patch's axes (:mod:`.point_patches`) on
+   the surface its neighbouring points fix (:mod:`.surface_normals`), when the images
+   are given, ``patch_px`` is not 0 and at least ``patch_min_views`` images see it;
+   such a point is triangulated again where its patch is found.
 
 A class the filters kept carries its database id; the others -1. Cost: a sort and
 linear passes over the classified features (about 0.1 s for the room's 60k members).
@@ -45,6 +46,7 @@ from visibility_builder.point_patches import (
     point_patches,
     triangulate_on_patches,
 )
+from visibility_builder.surface_normals import surface_normals
 from visibility_builder.verification import map_rays, reprojection_error
 
 __all__ = ['PointsConfig', 'central_members', 'labels_by_image', 'scene_points']
@@ -71,6 +73,10 @@ class PointsConfig:
             pixels); at 70 a 15 px patch takes about 45 bytes instead of 225 (70, not
             80: with patches from 5 views the fisheye room's file stays within a third
             of the structure-based peer's compact map).
+        patch_normal_radius_m: the patches' axes lie on the plane that the points within
+            this distance (metres) fix (:mod:`.surface_normals`; 0: every patch on the
+            plane facing its view). On a plane facing the view, a patch seen obliquely
+            was aligned a few tenths of a pixel off in the localizer's frames.
     """
 
     enabled: bool = True
@@ -81,6 +87,7 @@ class PointsConfig:
     patch_px: int = 15
     patch_min_views: int = 5
     patch_quality: int = 70
+    patch_normal_radius_m: float = 0.3
 
     def __post_init__(self) -> None:
         if isinstance(self.patch_quality, bool) or \
@@ -101,6 +108,12 @@ class PointsConfig:
                 self.min_views < 2:
             raise VisibilityBuilderError(f'points.min_views must be an integer >= 2, '
                                          f'got {self.min_views!r}')
+        if not (isinstance(self.patch_normal_radius_m, (int, float))
+                and not isinstance(self.patch_normal_radius_m, bool)
+                and math.isfinite(self.patch_normal_radius_m)
+                and self.patch_normal_radius_m >= 0):
+            raise VisibilityBuilderError(f'points.patch_normal_radius_m must be a number '
+                                         f'>= 0, got {self.patch_normal_radius_m!r}')
         for name in ('min_angle_deg', 'max_distance_m', 'max_error_px'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
@@ -191,11 +204,13 @@ def scene_points(image_labels: Sequence[np.ndarray], features: Sequence[ImageFea
         usable = np.ones(len(camera_poses), bool) if usable_image is None else usable_image
         xyz = points[keep]
         for attempt in range(2):
+            normals = surface_normals(xyz, config.patch_normal_radius_m) \
+                if config.patch_normal_radius_m > 0 else None
             view, view_uv = choose_patch_views(
                 xyz, row_of[inverse[member]], image[member], camera_poses, centre[keep],
                 camera, config.patch_px, usable)
             patches, axes = point_patches(xyz, view, view_uv, camera_poses, camera,
-                                          config.patch_px, decode)
+                                          config.patch_px, decode, normals)
             if attempt == 0:   # each point where its patch is, then its patch there
                 xyz, _ = triangulate_on_patches(
                     xyz, patches, axes, row_of[inverse[member]], image[member],
