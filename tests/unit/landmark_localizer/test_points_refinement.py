@@ -251,6 +251,37 @@ def test_a_judged_vote_starts_from_the_pose_its_points_polished(monkeypatch) -> 
     np.testing.assert_allclose(found.solution.two_view_pose, seed.estimate.pose)
 
 
+def test_a_vote_starts_from_its_points_whatever_its_views_polish_says(monkeypatch) -> None:
+    """A judged vote at the truth whose full-size polish on the two model views moves it 5 cm
+    (as ``refine_pose`` did on the pinhole room: 0.85 -> 5.91 cm): the start refines the
+    polish on the points and takes the points' pose (within a millimetre), and the step
+    then leaves it to them (no absolute polish); a polish the points refute falls back to
+    the vote's own pose."""
+    from localizer_samples import AHEAD, wall_ahead
+
+    from landmark_localizer.config import LocalizerConfig
+    from landmark_localizer.frames import Frame
+    import landmark_localizer.localizer as localizer
+    from landmark_localizer.pose import PoseSolution
+    from landmark_localizer.voting import Verified
+    from vbn_common.geometry.localize import PoseEstimate
+
+    _, index, uv, ids = wall_ahead(30, -0.9, 3.9)
+
+    def solution(offset: list[float]) -> PoseSolution:
+        return PoseSolution(PoseEstimate(*(AHEAD + offset), np.eye(3) * 1e-4, 0.5, 0.0, 2,
+                                         True), ids, 2, len(ids), 0.3)
+    image = np.zeros((64, 64), np.uint8)
+    for moved, expected in (([0.05, -0.03, 0.0], AHEAD), ([0.6, 0.5, 0.3], AHEAD + 0.001)):
+        loc = localizer.Localizer(index, LocalizerConfig())
+        monkeypatch.setattr(localizer, 'refine_pose',
+                            lambda *args, moved=moved, **kwargs: solution(moved))
+        voted = Verified(0, solution([0.001, 0.001, 0.001]), ids, uv, judged=True)
+        loc._start(voted, Frame(0, image))
+        np.testing.assert_allclose(loc.camera_pose, expected, atol=1e-3)
+        assert loc._on_points == (expected is AHEAD)
+
+
 def test_scene_points_are_measured_where_the_tracked_points_put_the_camera() -> None:
     """A two-view seed 8 cm and 2 degrees off (as on a turn of a kidnapped run).
 
