@@ -446,3 +446,25 @@ def test_a_level_fit_skips_the_tilt_and_a_raised_camera_takes_it(world, monkeypa
     # Kept level, the same points fit no pose within max_residual_px.
     assert planar is None
 
+
+
+def test_every_step_of_a_dim_frame_sees_it_exposed(world, monkeypatch) -> None:
+    """A dim frame is brightened once (``exposure_target``), and the vote, a start's
+    re-anchoring and measurements and a switch's windows all get that image: a start had
+    searched and measured the dim one while the tracked frames used the bright one."""
+    from landmark_localizer.frames import Frame
+    from vbn_common.images import exposed
+
+    _, index = world
+    loc = Localizer(index, LocalizerConfig())
+    seen = []
+    monkeypatch.setattr(loc, '_vote_global',
+                        lambda image, frame: seen.append((image, frame.image)) or '')
+    monkeypatch.setattr(loc, '_absolute', lambda image, frame: None)
+    dim = np.tile(np.arange(0, 100, dtype=np.uint8), (64, 1))   # 99th percentile 98
+    loc.step(Frame(1, dim))
+    bright = exposed(dim, LocalizerConfig().exposure_target)
+    assert bright.max() > 2 * dim.max()
+    (image, frame_image), = seen
+    np.testing.assert_array_equal(image, bright)
+    np.testing.assert_array_equal(frame_image, bright)

@@ -154,6 +154,7 @@ class Localizer:
             raise LocalizerError(f'a frame must be a grey uint8 image, got {image.dtype} '
                                  f'{image.shape}')
         image = exposed(image, self.config.exposure_target)
+        frame = replace(frame, image=image)   # every step of the frame sees it exposed
         event = ''
         if self.last_stamp is not None and frame.stamp_ns < self.last_stamp:
             self.reset()
@@ -288,14 +289,13 @@ class Localizer:
             # Voting's keypoints come from the smaller image: put the tracks back on
             # full-size SIFT keypoints and polish the pose on them.
             radius = 1.0 / self.config.vote_scale + 1.0
-            tracks = self._reanchor(np.asarray(frame.image), tracks,
-                                    np.arange(len(tracks)), radius)
-            polished = refine_pose(self.index, region, tracks.class_ids,
-                                   tracks.uv.astype(float), solution.estimate.pose,
-                                   self.config)
+            tracks = self._reanchor(frame.image, tracks, np.arange(len(tracks)), radius)
+            uv = tracks.uv.astype(float)
+            polished = refine_pose(self.index, region, tracks.class_ids, uv,
+                                   solution.estimate.pose, self.config)
             seed = polished or solution   # which its points polish, as a tracked pose's:
             refined = refine_on_points(   # two views alone took one from 0.9 to 5.9 cm
-                self.index, tracks.class_ids, tracks.uv.astype(float), seed, self.config,
+                self.index, tracks.class_ids, uv, seed, self.config,
                 scene=lambda pose: self.tracker.scene.measure(frame.image, pose),
                 tracked_weight=self.balance.weight())
             self._on_points = refined is not None and refined is not seed
@@ -307,7 +307,7 @@ class Localizer:
         # The vote matched some of the region's features; look for the others where
         # the pose puts them (a LOST frame has the time), as a switch does.
         self.tracker.tracks, _ = self._search_missing(
-            np.asarray(frame.image), tracks, region, self.camera_pose,
+            frame.image, tracks, region, self.camera_pose,
             self.config.switch_redetect, landmark_first=True)
 
     def _allowed_by_hint(self) -> np.ndarray | None:
