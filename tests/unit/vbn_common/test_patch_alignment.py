@@ -54,3 +54,102 @@ def test_warp_is_opencv_warp_affine_of_each_patch() -> None:
     np.testing.assert_array_equal(doubled[:, c - 10:c + 11:2, c - 10:c + 11:2],
                                   patches[:2])
     assert warp_patches(patches[:0], maps[:0], tile).shape == (0, tile, tile)
+
+
+def test_image_tiles_are_the_squares_at_their_corners() -> None:
+    """By hand on a 5 x 6 ramp, and against a fancy index of every pixel at random corners."""
+    from vbn_common.patch_alignment import image_tiles
+
+    image = np.arange(30, dtype=np.uint8).reshape(5, 6)
+    tiles = image_tiles(image, np.array([[0, 0], [3, 2]]), 3)
+    np.testing.assert_array_equal(tiles[0], [[0, 1, 2], [6, 7, 8], [12, 13, 14]])
+    np.testing.assert_array_equal(tiles[1], [[15, 16, 17], [21, 22, 23], [27, 28, 29]])
+    rng = np.random.default_rng(4)
+    big = rng.integers(0, 256, (120, 160), dtype=np.uint8)
+    corners = np.stack([rng.integers(0, 160 - 21, 50), rng.integers(0, 120 - 21, 50)], 1)
+    span = np.arange(21)
+    expected = big[corners[:, 1, None, None] + span[None, :, None],
+                   corners[:, 0, None, None] + span[None, None, :]]
+    np.testing.assert_array_equal(image_tiles(big, corners, 21), expected)
+    image_tiles(big, corners, 21)[0, 0, 0] = 0   # a copy: the image is untouched
+    assert big[corners[0, 1], corners[0, 0]] == expected[0, 0, 0]
+
+
+def test_tile_mosaic_centres_smaller_tiles_in_their_cells() -> None:
+    from vbn_common.patch_alignment import tile_mosaic
+
+    tiles = np.stack([np.full((3, 3), 10.0), np.full((3, 3), 20.4), np.full((3, 3), 300.0)])
+    mosaic = tile_mosaic(tiles, 2, 5)
+    assert mosaic.shape == (10, 10) and mosaic.dtype == np.uint8
+    np.testing.assert_array_equal(mosaic[1:4, 1:4], 10)
+    np.testing.assert_array_equal(mosaic[1:4, 6:9], 20)
+    np.testing.assert_array_equal(mosaic[6:9, 1:4], 255)   # clipped
+    assert mosaic.sum() == 9 * (10 + 20 + 255)             # zero around them, and the empty cell
+    np.testing.assert_array_equal(tile_mosaic(tiles, 2), tile_mosaic(tiles, 2, 3))
+
+
+def _align_with_whole_tiles(image, patches, uv, maps, max_shift_px, min_correlation):  # noqa: ANN001, ANN202
+    """align_patches as it was before, every template warped over its whole tile."""
+    import math
+
+    from vbn_common.patch_alignment import (
+        MARGIN_PX,
+        _correlations,
+        _match_brightness,
+        image_tiles,
+        tile_mosaic,
+    )
+
+    n, side = len(patches), patches.shape[1]
+    pixel, found = np.full((n, 2), np.nan), np.zeros(n, bool)
+    tile = side + 2 * (MARGIN_PX + int(math.ceil(max_shift_px)))
+    half = tile // 2
+    corner = np.round(uv).astype(np.int64) - half
+    h, w = image.shape
+    rows = np.flatnonzero((corner[:, 0] >= 0) & (corner[:, 1] >= 0) &
+                          (corner[:, 0] + tile <= w) & (corner[:, 1] + tile <= h))
+    crops = image_tiles(image, corner[rows], tile).astype(np.float32)
+    templates = _match_brightness(warp_patches(patches[rows], maps[rows], tile), crops, side)
+    cols = int(math.ceil(math.sqrt(len(rows))))
+    cell = np.stack([np.arange(len(rows)) % cols, np.arange(len(rows)) // cols], 1) * tile
+    guess = (uv[rows] - corner[rows] + cell).astype(np.float32).reshape(-1, 1, 2)
+    moved, status, _ = cv2.calcOpticalFlowPyrLK(
+        tile_mosaic(templates, cols), tile_mosaic(crops, cols),
+        (cell + half).astype(np.float32).reshape(-1, 1, 2), guess.copy(),
+        winSize=(side - 2, side - 2), maxLevel=0, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
+        criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01))
+    moved = moved.reshape(-1, 2)
+    good = (status.ravel() == 1) & \
+        (np.linalg.norm(moved - guess.reshape(-1, 2), axis=1) <= max_shift_px)
+    good[good] = _correlations(crops[good], (moved - cell)[good], templates[good],
+                               side - 2) >= min_correlation
+    pixel[rows[good]] = (moved - cell + corner[rows])[good]
+    found[rows[good]] = True
+    return pixel, found
+
+
+def test_warping_only_the_central_square_aligns_exactly_as_the_whole_tile() -> None:
+    """Lucas-Kanade's window, the brightness and the correlation read only the central
+    square of a template: the same pixels to the last bit, on blurred noise with patches
+    cut near their predictions and turned, scaled and sheared."""
+    from vbn_common.patch_alignment import align_patches
+
+    rng = np.random.default_rng(5)
+    found_any = 0
+    for _ in range(12):
+        image = cv2.GaussianBlur(rng.integers(0, 256, (240, 320)).astype(np.uint8), (0, 0),
+                                 float(rng.uniform(1.0, 3.0)))
+        side, n = int(rng.choice([15, 21, 31])), int(rng.integers(1, 40))
+        xs, ys = rng.integers(30, 320 - 30 - side, n), rng.integers(30, 240 - 30 - side, n)
+        patches = np.stack([image[y:y + side, x:x + side] for x, y in zip(xs, ys, strict=True)])
+        uv = np.stack([xs + side // 2, ys + side // 2], 1) + rng.normal(0.0, 2.0, (n, 2))
+        maps = np.eye(2)[None] * rng.uniform(0.8, 1.2, (n, 1, 1)) + \
+            rng.normal(0.0, 0.05, (n, 2, 2))
+        shift = float(rng.uniform(3.0, 9.0))
+        pixel, found = align_patches(image, patches, uv, maps, shift, 0.5)
+        expected, expected_found = _align_with_whole_tiles(image, patches, uv, maps, shift,
+                                                           0.5)
+        np.testing.assert_array_equal(found, expected_found)
+        np.testing.assert_array_equal(pixel, expected)
+        found_any += int(found.sum())
+    assert found_any > 100

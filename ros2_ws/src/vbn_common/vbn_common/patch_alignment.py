@@ -25,7 +25,8 @@ import math
 import cv2
 import numpy as np
 
-__all__ = ['MARGIN_PX', 'align_patches', 'patch_maps', 'tile_mosaic', 'warp_patches']
+__all__ = ['MARGIN_PX', 'align_patches', 'image_tiles', 'patch_maps', 'tile_mosaic',
+           'warp_patches']
 
 #: Image pixels around each warped patch in the mosaics beyond the largest move, for the
 #: alignment's window.
@@ -50,13 +51,30 @@ def patch_maps(ends: np.ndarray, seam_width: float | None = None) -> np.ndarray:
     return maps
 
 
-def tile_mosaic(tiles: np.ndarray, cols: int) -> np.ndarray:
-    """``(n, s, s)`` tiles laid row by row on a ``cols x cols`` grid, as one uint8 image."""
+def image_tiles(image: np.ndarray, corners: np.ndarray, size: int) -> np.ndarray:
+    """``(n, size, size)`` copies of the image's squares at ``corners`` (``(n, 2)`` x, y).
+
+    Every square must lie inside the image. One gather through a strided view: a fancy
+    index of every pixel took ten times as long (75 tiles of 55 px: 0.84 against 0.07 ms).
+    """
+    corners = np.asarray(corners, np.int64).reshape(-1, 2)
+    view = np.lib.stride_tricks.sliding_window_view(image, (size, size))
+    return view[corners[:, 1], corners[:, 0]]
+
+
+def tile_mosaic(tiles: np.ndarray, cols: int, cell: int | None = None) -> np.ndarray:
+    """``(n, s, s)`` tiles laid row by row on a ``cols x cols`` grid, as one uint8 image.
+
+    ``cell``: the grid's spacing (odd, at least ``s``; the tiles centred in their cells,
+    zero around them), or None for ``s``.
+    """
     n, size = len(tiles), tiles.shape[1]
-    grid = np.zeros((cols * cols, size, size), np.float32)
-    grid[:n] = tiles
-    grid = grid.reshape(cols, cols, size, size).transpose(0, 2, 1, 3)
-    return np.clip(np.rint(grid.reshape(cols * size, cols * size)), 0, 255).astype(np.uint8)
+    cell = size if cell is None else cell
+    lo = (cell - size) // 2
+    grid = np.zeros((cols * cols, cell, cell), np.float32)
+    grid[:n, lo:lo + size, lo:lo + size] = tiles
+    grid = grid.reshape(cols, cols, cell, cell).transpose(0, 2, 1, 3)
+    return np.clip(np.rint(grid.reshape(cols * cell, cols * cell)), 0, 255).astype(np.uint8)
 
 
 def warp_patches(patches: np.ndarray, maps: np.ndarray, tile: int) -> np.ndarray:
@@ -128,10 +146,11 @@ def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: 
         (corner[:, 0] + tile <= w) & (corner[:, 1] + tile <= h))
     if not len(rows):
         return pixel, found
-    templates = warp_patches(patches[rows], maps[rows], tile)
-    span = np.arange(tile)
-    crops = image[corner[rows, 1, None, None] + span[None, :, None],
-                  corner[rows, 0, None, None] + span[None, None, :]].astype(np.float32)
+    # Only the central square of each warped patch is read: Lucas-Kanade's window (two
+    # pixels narrower, from the tile's centre, whole pixels) with its derivatives, the
+    # brightness and the correlation. Warping the whole tile cost 2.7 times as much.
+    templates = warp_patches(patches[rows], maps[rows], side)
+    crops = image_tiles(image, corner[rows], tile).astype(np.float32)
     templates = _match_brightness(templates, crops, side)
     cols = int(math.ceil(math.sqrt(len(rows))))
     cell = np.stack([np.arange(len(rows)) % cols, np.arange(len(rows)) // cols], 1) * tile
@@ -139,7 +158,7 @@ def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: 
     guess = (uv[rows] - corner[rows] + cell).astype(np.float32).reshape(-1, 1, 2)
     window = side - 2
     moved, status, _ = cv2.calcOpticalFlowPyrLK(
-        tile_mosaic(templates, cols), tile_mosaic(crops, cols), start, guess.copy(),
+        tile_mosaic(templates, cols, tile), tile_mosaic(crops, cols), start, guess.copy(),
         winSize=(window, window), maxLevel=0, flags=cv2.OPTFLOW_USE_INITIAL_FLOW,
         criteria=(cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.01))
     moved = moved.reshape(-1, 2)
@@ -155,11 +174,15 @@ def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: 
 
 
 def _match_brightness(templates: np.ndarray, crops: np.ndarray, side: int) -> np.ndarray:
-    """Templates brought to their crops' mean and contrast over the central ``side`` square."""
-    lo = (templates.shape[1] - side) // 2
-    inner = (slice(None), slice(lo, lo + side), slice(lo, lo + side))
-    mean_t, mean_c = templates[inner].mean(axis=(1, 2)), crops[inner].mean(axis=(1, 2))
-    gain = crops[inner].std(axis=(1, 2)) / np.maximum(templates[inner].std(axis=(1, 2)), 1.0)
+    """Templates brought to their crops' mean and contrast over the central ``side`` square.
+
+    The templates and the crops are centred squares, of any sizes of at least ``side``.
+    """
+    lo, at = (templates.shape[1] - side) // 2, (crops.shape[1] - side) // 2
+    inner = templates[:, lo:lo + side, lo:lo + side]
+    outer = crops[:, at:at + side, at:at + side]
+    mean_t, mean_c = inner.mean(axis=(1, 2)), outer.mean(axis=(1, 2))
+    gain = outer.std(axis=(1, 2)) / np.maximum(inner.std(axis=(1, 2)), 1.0)
     return (templates - mean_t[:, None, None]) * gain[:, None, None] + mean_c[:, None, None]
 
 
@@ -170,20 +193,29 @@ def _correlations(crops: np.ndarray, at: np.ndarray, templates: np.ndarray, side
     Args:
         crops: ``(n, t, t)`` the image's tiles.
         at: ``(n, 2)`` where each template's centre was found, in its tile's pixels.
-        templates: ``(n, t, t)`` the warped patches, centred.
+        templates: ``(n, s, s)`` the warped patches, centred (``s`` odd, at least ``side``).
         side: The side of the compared square (odd).
     """
     n, tile = crops.shape[:2]
     if not n:
         return np.zeros(0)
-    lo = (tile - side) // 2
+    lo = (templates.shape[1] - side) // 2
     base = np.floor(at)
     fx, fy = (at - base).T
-    # One gather of each square and its next row and column, then the bilinear blend.
-    reach = np.arange(side + 1) - side // 2
-    x = np.clip(base[:, 0, None] + reach, 0, tile - 1).astype(np.int64)   # (n, side + 1)
-    y = np.clip(base[:, 1, None] + reach, 0, tile - 1).astype(np.int64)
-    block = crops[np.arange(n)[:, None, None], y[:, :, None], x[:, None, :]]
+    # One gather of each square and its next row and column (the tile's edge repeated
+    # beyond it), then the bilinear blend.
+    first = base.astype(np.int64) - side // 2
+    inside = np.all((first >= 0) & (first + side + 1 <= tile), axis=1)
+    block = np.empty((n, side + 1, side + 1), crops.dtype)
+    block[inside] = np.lib.stride_tricks.sliding_window_view(
+        crops, (side + 1, side + 1), axis=(1, 2))[np.flatnonzero(inside), first[inside, 1],
+                                                  first[inside, 0]]
+    if not inside.all():
+        reach = np.arange(side + 1)
+        x = np.clip(first[~inside, 0, None] + reach, 0, tile - 1)   # (m, side + 1)
+        y = np.clip(first[~inside, 1, None] + reach, 0, tile - 1)
+        block[~inside] = crops[np.flatnonzero(~inside)[:, None, None], y[:, :, None],
+                               x[:, None, :]]
     fx, fy = fx[:, None, None], fy[:, None, None]
     across = block[:, :, :-1] * (1 - fx) + block[:, :, 1:] * fx
     sample = (across[:, :-1] * (1 - fy) + across[:, 1:] * fy).reshape(n, -1)
