@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
 import numpy as np
 import pytest
 
@@ -151,6 +153,32 @@ def test_a_dim_frame_is_brightened_to_the_exposure_target_and_a_bright_one_kept(
     assert exposed(ramp, 50.0) is ramp and exposed(ramp, 0.0) is ramp
     dark = np.full((8, 8), 10, np.uint8)
     assert int(exposed(dark, 200.0)[0, 0]) == int(10 * MAX_EXPOSURE_GAIN)
+
+
+@settings(max_examples=200, derandomize=True, deadline=None)
+@given(st.integers(1, 256), st.integers(0, 255), st.floats(0.01, 300.0), st.integers(0, 2**31))
+def test_the_bright_frame_shortcut_agrees_with_the_percentile(top, fill, target, seed) -> None:
+    """Against the 99th percentile computed from the histogram, at the boundary too: a
+    frame with exactly 1 % of its pixels at ceil(target) is dim, one pixel more is not."""
+    import math
+
+    from landmark_localizer.frames import MAX_EXPOSURE_GAIN, exposed
+
+    rng = np.random.default_rng(seed)
+    image = rng.integers(0, top, (20, 30), dtype=np.uint8)
+    image[:, :int(seed % 31)] = fill
+    counts = np.cumsum(np.bincount(image.ravel(), minlength=256))
+    p99 = int(np.searchsorted(counts, 0.99 * image.size))
+    expected = image if p99 >= target else \
+        np.clip(np.rint(image * min(MAX_EXPOSURE_GAIN, target / max(p99, 1))), 0, 255)
+    np.testing.assert_allclose(exposed(image, target), expected, atol=1)
+    assert (exposed(image, target) is image) == (p99 >= target)
+    level = min(math.ceil(target), 255)
+    edge = np.zeros(1000, np.uint8)
+    edge[:10] = level                  # 1 %: the 99th percentile is 0
+    assert (exposed(edge, target) is edge) == (level >= target and 0 >= target)
+    edge[:11] = level                  # beyond 1 %: the percentile is the level
+    assert (exposed(edge, target) is edge) == (level >= target)
 
 
 def test_the_quality_a_supervisor_acts_on() -> None:
