@@ -105,3 +105,21 @@ def test_transform_points_agrees_with_compose_and_inverse(values):
 def test_wrap_angle_range():
     angles = wrap_angle(np.array([math.pi, -math.pi, 3 * math.pi / 2, 0.25]))
     assert angles == pytest.approx([-math.pi, -math.pi, -math.pi / 2, 0.25])
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.lists(st.floats(-20, 20), min_size=6, max_size=6),
+       st.sampled_from([None, math.pi, -math.pi, 0.0, 2 * math.pi]))
+def test_one_pose_gives_what_the_batch_gives_to_the_last_bit(values, yaw):
+    """One pose takes scalar arithmetic (most calls): the batch's numbers (to the last bit
+    here; the tolerance is for a numpy whose vector cosine rounds otherwise), the wrap of
+    +-pi included (to -pi, as wrap_angle)."""
+    a, b = np.array(values[:3]), np.array(values[3:])
+    if yaw is not None:
+        a[2] = b[2] = yaw
+    np.testing.assert_allclose(compose_poses(a, b), compose_poses(a[None], b[None])[0],
+                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(invert_pose(a), invert_pose(a[None])[0], rtol=0, atol=1e-12)
+    assert compose_poses(a, b).shape == invert_pose(a).shape == (3,)
+    assert compose_poses([0.0, 0.0, math.pi / 2], [1.0, 0.0, math.pi / 2]) == \
+        pytest.approx([0.0, 1.0, -math.pi])

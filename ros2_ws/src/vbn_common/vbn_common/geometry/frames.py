@@ -102,6 +102,10 @@ def compose_poses(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
+    if a.shape == b.shape == (3,):   # one pose each (most calls): scalar arithmetic
+        c, s = math.cos(a[2]), math.sin(a[2])
+        return np.array([a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1],
+                         (a[2] + b[2] + math.pi) % (2.0 * math.pi) - math.pi])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1],
                      a[..., 1] + s * b[..., 0] + c * b[..., 1],
@@ -111,6 +115,10 @@ def compose_poses(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def invert_pose(a: np.ndarray) -> np.ndarray:
     """Return the inverse of planar pose(s) ``(x, y, yaw)``."""
     a = np.asarray(a, dtype=float)
+    if a.shape == (3,):   # one pose (most calls): scalar arithmetic
+        c, s = math.cos(a[2]), math.sin(a[2])
+        return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1],
+                         (math.pi - a[2]) % (2.0 * math.pi) - math.pi])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     return np.stack([-c * a[..., 0] - s * a[..., 1], s * a[..., 0] - c * a[..., 1],
                      wrap_angle(-a[..., 2])], axis=-1)
