@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+import subprocess
 
 import pytest
 from ros_harness import isolated_env, pick_domain_id
@@ -12,8 +13,17 @@ PEER = str(Path(__file__).parent / 'peers' / 'isolation_peer.py')
 
 
 def _result(proc) -> dict:
-    assert proc.wait(timeout=90) == 0, proc.output
-    return json.loads(proc.output.strip().splitlines()[-1])
+    """The peer's JSON line; its exit is waited for, but a teardown that hangs after the line
+    (the middleware's, seen once in a full test run: still running 90 s after printing at
+    1 s) is stopped rather than failing a test of what the line says."""
+    line = proc.wait_for_output(r'(?m)^\{"tag".*\}$', timeout=90).group(0)
+    try:
+        code = proc.popen.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.stop()
+    else:
+        assert code == 0, proc.output
+    return json.loads(line)
 
 
 def test_same_domain_peers_see_each_other(start_process, ros_domain_id):
