@@ -235,7 +235,7 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     columns = None if n_free == 6 else np.flatnonzero(free)   # all free: no copy
     ridge = 1e-12 * np.eye(n_free)
     for _ in range(iterations):
-        r, jac, norms = _weighed(state, rays, points, columns)
+        r, jac, norms = _linearised(state, rays, points, columns)
         weights = np.minimum(1.0, threshold / np.maximum(norms, 1e-12))
         if point_weights is not None:
             weights = weights * point_weights
@@ -257,7 +257,7 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
             break
     if info is None:
         return None
-    r, jac, norms = _weighed(state, rays, points, columns)
+    r, jac, norms = _linearised(state, rays, points, columns)
     weights = np.minimum(1.0, threshold / np.maximum(norms, 1e-12))
     squares = norms ** 2
     if point_weights is not None:
@@ -271,7 +271,7 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
     return state, 0.5 * (cov + cov.T)
 
 
-def _weighed(state: np.ndarray, rays: np.ndarray, points: np.ndarray,
+def _linearised(state: np.ndarray, rays: np.ndarray, points: np.ndarray,
              columns: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(r (n, 3), J (3 n, k), |r| (n,))`` for the free ``columns`` (None: all six)."""
     r, full = _residuals_and_jacobian(state, rays, points)

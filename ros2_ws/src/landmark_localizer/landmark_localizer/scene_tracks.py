@@ -50,7 +50,7 @@ from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.matching import squared_distances
 from landmark_localizer.points_refinement import point_errors
 from vbn_common.geometry.camera import pixels_per_radian
-from vbn_common.patch_alignment import tile_mosaic
+from vbn_common.patch_alignment import image_tiles, tile_mosaic
 
 __all__ = ['CELLS', 'MAX_SHIFT_DEG', 'SceneTracks', 'scene_tracks_unavailable']
 
@@ -137,9 +137,7 @@ class SceneTracks:
         if not len(rows):
             return np.zeros((0, 2)), np.zeros((0, 3))
         cols = int(math.ceil(math.sqrt(len(rows))))
-        span = np.arange(size)
-        crops = image[corner[rows, 1, None, None] + span[None, :, None],
-                      corner[rows, 0, None, None] + span[None, None, :]].astype(np.float32)
+        crops = image_tiles(image, corner[rows], size).astype(np.float32)
         patches = self._patches[rows].astype(np.float32)
         # The birth patch brought to the crop's brightness and contrast (exposure moves).
         mean_p, mean_c = patches.mean(axis=(1, 2)), crops.mean(axis=(1, 2))
