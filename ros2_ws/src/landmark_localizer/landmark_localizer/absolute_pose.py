@@ -33,9 +33,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 
-import cv2
 import numpy as np
 
+from landmark_localizer.angular_kernels import gauss_newton, normal_equations
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, tilt_rotation
 from landmark_localizer.pose import PoseSolution
@@ -179,8 +179,8 @@ def _coarse_inliers(poses: np.ndarray, rays: np.ndarray, points: np.ndarray,
 def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
     """(n, 3) observed ray (tilted by the state) minus the predicted direction.
 
-    The same as :func:`tilt_rotation` and :func:`_predicted`; the refinement takes its
-    derivatives from :func:`_residuals_and_jacobian`.
+    The same as :func:`tilt_rotation` and :func:`_predicted`; the refinement's compiled
+    steps compute it with its derivatives (:func:`.angular_kernels.linearise`).
     """
     x, y, yaw, pitch, roll, dz = (float(v) for v in state)
     turned = rays @ tilt_rotation(pitch, roll).T
@@ -223,97 +223,28 @@ def refine_absolute(pose: np.ndarray, rays: np.ndarray, points: np.ndarray,
             weighted squared errors. None: all 1.
     """
     state = np.concatenate([np.asarray(pose, float), np.zeros(3)])[:6]
-    free = np.array([True, True, True, tilt_prior > 0, tilt_prior > 0, height_prior > 0])
+    free = np.flatnonzero([True, True, True, tilt_prior > 0, tilt_prior > 0,
+                           height_prior > 0])
     prior = np.array([0, 0, 0, tilt_prior, tilt_prior, height_prior], float)
     centre = np.zeros(6)
     if motion_prior is not None:
         centre[:3], prior[:3] = motion_prior[0], motion_prior[1]
-    n_free = int(free.sum())
-    prior_info = np.diag(np.where(prior[free] > 0, (sigma / np.maximum(prior[free], 1e-12)) ** 2,
-                                  0.0))
-    info = None
-    columns = None if n_free == 6 else np.flatnonzero(free)   # all free: no copy
-    ridge = 1e-12 * np.eye(n_free)
-    for _ in range(iterations):
-        r, jac, norms = _linearised(state, rays, points, columns)
-        weights = np.minimum(1.0, threshold / np.maximum(norms, 1e-12))
-        if point_weights is not None:
-            weights = weights * point_weights
-        jw = jac * np.repeat(weights, 3)[:, None]
-        info = jw.T @ jac + prior_info
-        offset = state[free] - centre[free]
-        offset[2] = float(wrap_angle(offset[2]))  # yaw is always free
-        gradient = jw.T @ r.ravel() + prior_info @ offset
-        # A 6 x 6 system: OpenCV's LU solves it in a third of numpy's time.
-        ok, delta = cv2.solve(info + ridge, -gradient[:, None], flags=cv2.DECOMP_LU)
-        if not ok:
-            return None
-        delta = delta.ravel()
-        state[free] += delta
-        state[2] = float(wrap_angle(state[2]))
-        if not math.isfinite(float(state.sum())):
-            return None
-        if max(abs(delta[0]), abs(delta[1])) < STOP_M and abs(delta[2]) < STOP_RAD:
-            break
-    if info is None:
+    prior_info = np.where(prior[free] > 0, (sigma / np.maximum(prior[free], 1e-12)) ** 2, 0.0)
+    rays, points = np.ascontiguousarray(rays, float), np.ascontiguousarray(points, float)
+    weights = np.ones(len(rays)) if point_weights is None else \
+        np.ascontiguousarray(point_weights, float)
+    if iterations < 1 or gauss_newton(state, rays, points, threshold, weights, free,
+                                      prior_info, centre, iterations, STOP_M, STOP_RAD) < 0:
         return None
-    r, jac, norms = _linearised(state, rays, points, columns)
-    weights = np.minimum(1.0, threshold / np.maximum(norms, 1e-12))
-    squares = norms ** 2
-    if point_weights is not None:
-        weights, squares = weights * point_weights, squares * point_weights
-    noise = max(float(np.sqrt(np.mean(squares))), sigma) if len(norms) else sigma
-    info = (jac * np.repeat(weights, 3)[:, None]).T @ jac * (sigma / noise) ** 2 + prior_info
+    hessian, gradient = np.empty((6, 6)), np.empty(6)
+    squares = normal_equations(state, rays, points, threshold, weights, hessian, gradient)
+    noise = max(math.sqrt(squares / len(rays)), sigma) if len(rays) else sigma
+    info = hessian[np.ix_(free, free)] * (sigma / noise) ** 2 + np.diag(prior_info)
     try:
         cov = sigma ** 2 * np.linalg.inv(info)[:3, :3]
     except np.linalg.LinAlgError:
         return None
     return state, 0.5 * (cov + cov.T)
-
-
-def _linearised(state: np.ndarray, rays: np.ndarray, points: np.ndarray,
-             columns: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(r (n, 3), J (3 n, k), |r| (n,))`` for the free ``columns`` (None: all six)."""
-    r, full = _residuals_and_jacobian(state, rays, points)
-    jac = full.reshape(-1, 6) if columns is None else \
-        full[:, :, columns].reshape(-1, len(columns))
-    return r, jac, np.sqrt(np.einsum('ij,ij->i', r, r))
-
-
-def _residuals_and_jacobian(state: np.ndarray, rays: np.ndarray, points: np.ndarray
-                            ) -> tuple[np.ndarray, np.ndarray]:
-    """``(r (n, 3), J (n, 3, 6))``: :func:`_residuals` and its derivatives, in closed form.
-
-    ``r = R(pitch, roll) ray - v / |v|`` with ``v = Rz(yaw)^T (p - (x, y, dz))``. Few
-    numpy calls: at a hundred points their fixed cost is most of the time.
-    """
-    x, y, yaw, pitch, roll, dz = (float(v) for v in state)
-    cp, sp, cr, sr = math.cos(pitch), math.sin(pitch), math.cos(roll), math.sin(roll)
-    ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    d_ry = np.array([[-sp, 0.0, cp], [0.0, 0.0, 0.0], [-cp, 0.0, -sp]])
-    d_rx = np.array([[0.0, 0.0, 0.0], [0.0, -sr, -cr], [0.0, cr, -sr]])
-    # The turned rays and their derivatives by pitch and roll, in one product.
-    turned = rays @ np.concatenate([(ry @ rx).T, (d_ry @ rx).T, (ry @ d_rx).T], axis=1)
-    c, s = math.cos(yaw), math.sin(yaw)
-    rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])   # map -> base
-    v = (points - np.array([x, y, dz])) @ rotation.T
-    inv = 1.0 / np.sqrt(np.maximum(np.einsum('ij,ij->i', v, v), 1e-24))[:, None]
-    u = v * inv
-    jac = np.empty((len(points), 3, 6))
-    # d(-u)/d(state) = -(I - u u^T) / |v| dv/d(state). For x, y and dz, dv is the column
-    # of -rotation: (rotation[:, k] - u (u . rotation[:, k])) / |v|. For yaw, dv =
-    # (v_y, -v_x, 0) is orthogonal to u: -dv / |v|.
-    moved = (rotation[None] - u[:, :, None] * (u @ rotation)[:, None, :]) * inv[:, :, None]
-    jac[:, :, 0] = moved[:, :, 0]
-    jac[:, :, 1] = moved[:, :, 1]
-    jac[:, :, 5] = moved[:, :, 2]
-    jac[:, 0, 2] = -u[:, 1]
-    jac[:, 1, 2] = u[:, 0]
-    jac[:, 2, 2] = 0.0
-    jac[:, :, 3] = turned[:, 3:6]
-    jac[:, :, 4] = turned[:, 6:9]
-    return turned[:, :3] - u, jac
 
 
 def solve_absolute(rays: np.ndarray, points: np.ndarray, rng: np.random.Generator, *,
