@@ -18,10 +18,15 @@ import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, RegionData
+from landmark_localizer.planar_kernels import refine_planar
 from landmark_localizer.tilt_refinement import marginal_covariance, refine_tilted
 from vbn_common.errors import VbnCommonError
-from vbn_common.geometry.epipolar import pointwise_planar_residuals
-from vbn_common.geometry.frames import compose_poses, invert_pose, wrap_angle
+from vbn_common.geometry.frames import (
+    BASE_TO_CAMERA_ROTATION,
+    compose_poses,
+    invert_pose,
+    wrap_angle,
+)
 from vbn_common.geometry.localize import PoseEstimate, position_from_views
 from vbn_common.geometry.motion import RelativeMotion, TwoViewConfig
 from vbn_common.geometry.two_view import relative_motion
@@ -222,30 +227,6 @@ def _correspondences(index: DatabaseIndex, region: RegionData, class_ids: np.nda
                             np.concatenate(model), np.concatenate(current))
 
 
-def _residuals(poses: np.ndarray, data: _Correspondences) -> np.ndarray:
-    """Sampson errors of every correspondence, ``(m, n)`` for ``m`` camera poses.
-
-    Several poses (the current one and its finite-difference probes) go through one
-    vectorised pass: the refinement's cost is numpy's call overhead, not arithmetic.
-    """
-    poses = np.atleast_2d(poses)
-    vp = data.view_poses
-    dx = poses[:, None, 0] - vp[None, :, 0]
-    dy = poses[:, None, 1] - vp[None, :, 1]
-    c, s = np.cos(vp[:, 2]), np.sin(vp[:, 2])
-    theta = wrap_angle(poses[:, None, 2] - vp[None, :, 2])
-    phi = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
-    return pointwise_planar_residuals(data.rays_model, data.rays_current,
-                                      theta[:, data.view], phi[:, data.view])
-
-
-def _residuals_and_jacobian(pose: np.ndarray, data: _Correspondences, step: np.ndarray
-                            ) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals at ``pose`` and their forward-difference Jacobian ``(n, 3)``."""
-    both = _residuals(np.vstack([pose, pose + np.diag(step)]), data)
-    return both[0], ((both[1:] - both[0]) / step[:, None]).T
-
-
 def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
                 uv: np.ndarray, initial: np.ndarray, config: LocalizerConfig,
                 iterations: int = 8, level_gate: bool = False) -> PoseSolution | None:
@@ -326,22 +307,20 @@ def refine_pose(index: DatabaseIndex, region: RegionData, class_ids: np.ndarray,
 
 def _refine_planar(initial: np.ndarray, data: _Correspondences, threshold: float,
                    iterations: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Gauss-Newton with Huber weights on ``(x, y, yaw)``: ``(pose, r, jacobian)``."""
-    pose = initial.copy()
-    step = np.array([1e-4, 1e-4, 1e-5])
-    for _ in range(iterations):
-        r, jac = _residuals_and_jacobian(pose, data, step)
-        weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
-        jw = jac * weights[:, None]
-        try:
-            delta = np.linalg.solve(jw.T @ jac + 1e-12 * np.eye(3), -(jw.T @ r))
-        except np.linalg.LinAlgError:
-            return None
-        pose = pose + delta
-        pose[2] = float(wrap_angle(pose[2]))
-        if np.abs(delta[:2]).max() < 1e-4 and abs(delta[2]) < 1e-5:
-            break  # a tenth of a millimetre: far below what the pixels resolve
-    r, jac = _residuals_and_jacobian(pose, data, step)
+    """Gauss-Newton with Huber weights on ``(x, y, yaw)``: ``(pose, r, jacobian)``.
+
+    Compiled (:func:`.planar_kernels.refine_planar`): the Sampson errors of
+    :func:`vbn_common.geometry.epipolar.planar_sampson`, each view's motion from the pose.
+    """
+    pose = np.array(initial, float)
+    n = len(data.view)
+    r, jac = np.empty(n), np.empty((n, 3))
+    if not refine_planar(pose, np.ascontiguousarray(data.view_poses, float),
+                         np.ascontiguousarray(data.view, np.int64),
+                         data.rays_model @ BASE_TO_CAMERA_ROTATION.T,
+                         data.rays_current @ BASE_TO_CAMERA_ROTATION.T,
+                         threshold, iterations, r, jac):
+        return None
     return pose, r, jac
 
 

@@ -1,0 +1,152 @@
+"""The compiled kernels of a tracked frame's refinements against their numpy definitions."""
+from __future__ import annotations
+
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import numpy as np
+import pytest
+
+from landmark_localizer.angular_kernels import (
+    SINGULAR,
+    gauss_newton,
+    normal_equations,
+    solve_in_place,
+)
+from landmark_localizer.planar_kernels import planar_residuals, refine_planar
+from vbn_common.geometry.epipolar import pointwise_planar_residuals
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, wrap_angle
+
+
+def _unit(rng: np.random.Generator, n: int) -> np.ndarray:
+    v = rng.normal(size=(n, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_the_small_solver_matches_lapack_and_reports_a_singular_matrix() -> None:
+    rng = np.random.default_rng(3)
+    for n in (3, 4, 6):
+        a = rng.normal(size=(n, n))
+        b = rng.normal(size=n)
+        x = b.copy()
+        assert solve_in_place(a.copy(), x, SINGULAR)
+        np.testing.assert_allclose(x, np.linalg.solve(a, b), rtol=1e-10, atol=1e-12)
+    # Needs a row swap: the first pivot is 0.
+    x = np.array([2.0, 3.0])
+    assert solve_in_place(np.array([[0.0, 1.0], [1.0, 0.0]]), x, 0.0)
+    np.testing.assert_array_equal(x, [3.0, 2.0])
+    singular = np.array([[1.0, 2.0], [2.0, 4.0]])
+    assert not solve_in_place(singular.copy(), np.ones(2), 0.0)
+    # Below OpenCV's DECOMP_LU threshold: singular for it, not for an exact test.
+    tiny = np.diag([1.0, 1e-15])
+    assert not solve_in_place(tiny.copy(), np.ones(2), SINGULAR)
+    x = np.ones(2)
+    assert solve_in_place(tiny.copy(), x, 0.0) and x[1] == pytest.approx(1e15)
+
+
+def _numpy_normal_equations(state, rays, points, threshold, weights):
+    from landmark_localizer.absolute_pose import _residuals
+
+    r = _residuals(state, rays, points)
+    jac = np.empty((len(rays), 3, 6))
+    for k in range(6):
+        step = np.zeros(6)
+        step[k] = 1e-7
+        jac[:, :, k] = (_residuals(state + step, rays, points)
+                        - _residuals(state - step, rays, points)) / 2e-7
+    norms = np.linalg.norm(r, axis=1)
+    w = np.minimum(1.0, threshold / norms) * weights
+    hessian = np.einsum('n,nki,nkj->ij', w, jac, jac)
+    gradient = np.einsum('n,nki,nk->i', w, jac, r)
+    return hessian, gradient, float(np.sum(weights * norms ** 2))
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(st.integers(0, 10**6))
+def test_the_normal_equations_are_the_huber_weighted_least_squares_ones(seed: int) -> None:
+    """J^T W J, J^T W r and the weighted squares, with J by central differences."""
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-3, 3, (15, 3))
+    rays = _unit(rng, 15)
+    state = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi),
+                  rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)]
+    weights = rng.uniform(0.2, 2.0, 15)
+    threshold = 0.3   # some rays within it (weight 1), some beyond (Huber)
+    hessian, gradient = np.empty((6, 6)), np.empty(6)
+    squares = normal_equations(state, rays, points, threshold, weights, hessian, gradient)
+    h, g, s = _numpy_normal_equations(state, rays, points, threshold, weights)
+    np.testing.assert_allclose(hessian, h, atol=1e-6)
+    np.testing.assert_allclose(gradient, g, atol=1e-6)
+    assert squares == pytest.approx(s, rel=1e-12)
+
+
+def test_gauss_newton_holds_the_unknowns_not_free_and_reports_a_failure() -> None:
+    rng = np.random.default_rng(5)
+    truth = np.array([0.4, -0.3, 0.7, 0.0, 0.0, 0.0])
+    points = rng.uniform(-3, 3, (30, 3)) + [0, 0, 1.0]
+    v = points - [truth[0], truth[1], 0.0]
+    c, s = math.cos(truth[2]), math.sin(truth[2])
+    rays = np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]])
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    state = truth + [0.05, -0.04, 0.03, 0.0, 0.0, 0.0]
+    free = np.array([0, 1, 2])
+    steps = gauss_newton(state, rays, points, 1.0, np.ones(30), free, np.zeros(3), np.zeros(6),
+                         20, 1e-9, 1e-10)
+    assert 1 <= steps < 20
+    np.testing.assert_allclose(state, truth, atol=1e-10)   # pitch, roll, dz stay 0
+    # A ray that is not finite: no state.
+    rays[3] = np.nan
+    assert gauss_newton(truth.copy(), rays, points, 1.0, np.ones(30), free, np.zeros(3),
+                        np.zeros(6), 5, 1e-9, 1e-10) == -1
+
+
+def _planar_setup(rng: np.random.Generator, n: int):
+    view_poses = np.column_stack([rng.uniform(-2, 2, (3, 2)), rng.uniform(-np.pi, np.pi, 3)])
+    view = rng.integers(0, 3, n)
+    return view_poses, view, _unit(rng, n), _unit(rng, n)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(st.integers(0, 10**6))
+def test_planar_residuals_are_the_sampson_errors_of_each_views_motion(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    view_poses, view, model, current = _planar_setup(rng, 40)
+    pose = np.r_[rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi)]
+    dx, dy = pose[0] - view_poses[:, 0], pose[1] - view_poses[:, 1]
+    c, s = np.cos(view_poses[:, 2]), np.sin(view_poses[:, 2])
+    theta = wrap_angle(pose[2] - view_poses[:, 2])
+    phi = np.arctan2(-s * dx + c * dy, c * dx + s * dy)
+    expected = pointwise_planar_residuals(model, current, theta[view], phi[view])
+    out = np.empty(40)
+    planar_residuals(pose, view_poses, view, model @ BASE_TO_CAMERA_ROTATION.T,
+                     current @ BASE_TO_CAMERA_ROTATION.T, out)
+    np.testing.assert_allclose(out, expected, atol=1e-12)
+
+
+def test_the_planar_refinement_finds_the_pose_the_views_saw() -> None:
+    """Rays of 3-D points seen from three model views and the true pose: the pose back."""
+    rng = np.random.default_rng(8)
+    view_poses = np.array([[0.0, 0.0, 0.2], [1.0, 0.3, -0.4], [0.2, 1.1, 1.0]])
+    truth = np.array([0.6, 0.5, 0.3])
+    points = np.column_stack([rng.uniform(-4, 4, (60, 2)), rng.uniform(-1, 1, 60)])
+    view = np.repeat([0, 1, 2], 20)
+
+    def rays(pose, pts):
+        v = pts - [pose[0], pose[1], 0.0]
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        out = np.column_stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1], v[:, 2]])
+        return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+    g1 = np.concatenate([rays(view_poses[k], points[view == k]) for k in range(3)])
+    g2 = rays(truth, points)
+    pose = truth + [0.03, -0.02, 0.01]
+    r, jac = np.empty(60), np.empty((60, 3))
+    assert refine_planar(pose, view_poses, view, g1, g2, 0.01, 20, r, jac)
+    np.testing.assert_allclose(pose, truth, atol=1e-6)
+    assert np.abs(r).max() < 1e-8
+    # The Jacobian returned is the residuals' forward difference at the pose.
+    probe = pose + [1e-4, 0.0, 0.0]
+    moved = np.empty(60)
+    planar_residuals(probe, view_poses, view, g1, g2, moved)
+    np.testing.assert_allclose(jac[:, 0], (moved - r) / 1e-4, atol=1e-9)
