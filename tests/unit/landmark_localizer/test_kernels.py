@@ -150,3 +150,28 @@ def test_the_planar_refinement_finds_the_pose_the_views_saw() -> None:
     moved = np.empty(60)
     planar_residuals(probe, view_poses, view, g1, g2, moved)
     np.testing.assert_allclose(jac[:, 0], (moved - r) / 1e-4, atol=1e-9)
+
+
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(st.integers(0, 10**6))
+def test_angular_errors_are_the_angles_at_the_tilted_state(seed: int) -> None:
+    from landmark_localizer.absolute_pose import _angular_errors
+    from landmark_localizer.angular_kernels import angular_errors
+    from landmark_localizer.index import tilt_rotation
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-3, 3, (20, 3))
+    rays = _unit(rng, 20)
+    state = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi),
+                  rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)]
+    expected = _angular_errors(state[None, :3], rays @ tilt_rotation(state[3], state[4]).T,
+                               points - [0.0, 0.0, state[5]])[0]
+    np.testing.assert_allclose(angular_errors(state, rays, points), expected, atol=1e-9)
+    # Exact rays: 0 (the half-angle form keeps small angles exact, unlike arccos).
+    exact = points - [state[0], state[1], state[5]]
+    c, s = math.cos(state[2]), math.sin(state[2])
+    level = np.column_stack([c * exact[:, 0] + s * exact[:, 1], -s * exact[:, 0]
+                             + c * exact[:, 1], exact[:, 2]])
+    level /= np.linalg.norm(level, axis=1, keepdims=True)
+    turned = level @ tilt_rotation(state[3], state[4])   # R^T: the rays the tilt sees
+    assert angular_errors(state, turned, points).max() < 1e-12

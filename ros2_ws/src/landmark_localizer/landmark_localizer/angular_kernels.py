@@ -20,7 +20,8 @@ import math
 from numba import njit
 import numpy as np
 
-__all__ = ['SINGULAR', 'gauss_newton', 'linearise', 'normal_equations', 'solve_in_place']
+__all__ = ['SINGULAR', 'angular_errors', 'gauss_newton', 'linearise', 'normal_equations',
+           'solve_in_place']
 
 #: OpenCV's LU (``DECOMP_LU``) calls a pivot this small singular.
 SINGULAR = 100.0 * np.finfo(float).eps
@@ -65,6 +66,24 @@ def _row(state: np.ndarray, ray: np.ndarray, point: np.ndarray, res: np.ndarray,
     jac[0, 4], jac[1, 4], jac[2, 4] = sp * cr * a1 - sp * sr * a2, -sr * a1 - cr * a2, \
         cp * cr * a1 - cp * sr * a2
     jac[0, 5], jac[1, 5], jac[2, 5] = -u0 * u2 * inv, -u1 * u2 * inv, (1.0 - u2 * u2) * inv
+
+
+@njit(cache=True)
+def angular_errors(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """(n,) angles between the rays turned by the state's tilt and the directions to points.
+
+    The errors :func:`~landmark_localizer.absolute_pose._angular_errors` gives at the
+    state's planar pose for ``rays @ tilt_rotation(pitch, roll).T`` and the points
+    lowered by ``dz``.
+    """
+    res, jac = np.empty(3), np.empty((3, 6))
+    out = np.empty(rays.shape[0])
+    for i in range(rays.shape[0]):
+        _row(state, rays[i], points[i], res, jac)
+        # |t - u|^2 = 2 - 2 t.u for unit t and u (the turned ray and the direction).
+        squared = res[0] * res[0] + res[1] * res[1] + res[2] * res[2]
+        out[i] = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(squared)))
+    return out
 
 
 @njit(cache=True)

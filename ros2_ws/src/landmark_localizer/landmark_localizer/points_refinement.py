@@ -18,14 +18,14 @@ import numpy as np
 
 from landmark_localizer.absolute_pose import (
     JUDGE_POINTS,
-    _angular_errors,
     _coarse_inliers,
     _spread,
     base_rays,
     refine_absolute,
 )
+from landmark_localizer.angular_kernels import angular_errors
 from landmark_localizer.config import LocalizerConfig
-from landmark_localizer.index import DatabaseIndex, tilt_rotation
+from landmark_localizer.index import DatabaseIndex
 from landmark_localizer.pose import PoseSolution
 from vbn_common.geometry.frames import wrap_angle
 from vbn_common.geometry.localize import PoseEstimate
@@ -125,8 +125,8 @@ def point_errors(index: DatabaseIndex, state: np.ndarray, uv: np.ndarray, xyz: n
 
 def _state_errors(state: np.ndarray, rays: np.ndarray, xyz: np.ndarray) -> np.ndarray:
     """(n,) angular errors of rays (level base frame) at a ``(6,)`` state, radians."""
-    return _angular_errors(state[None, :3], rays @ tilt_rotation(state[3], state[4]).T,
-                           xyz - np.array([0.0, 0.0, state[5]]))[0]
+    return angular_errors(np.asarray(state, float), np.ascontiguousarray(rays, float),
+                          np.ascontiguousarray(xyz, float))
 
 
 #: Mahalanobis distance (3 degrees of freedom, the motion prior's own spread) of the
