@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import math
 
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from localizer_samples import HEIGHT, project, synthetic_database, wall_points
 import numpy as np
 import pytest
@@ -317,6 +319,29 @@ def test_a_masked_window_keeps_every_keypoint_within_the_radius_and_its_descript
             assert np.array_equal(desc[keep], all_desc[near]) if near.any() else not keep.any()
             checked += int(near.sum())
     assert checked >= 5
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(st.integers(0, 10**6))
+def test_the_nearest_keypoint_is_the_brute_force_one(seed: int) -> None:
+    """Within the radius, the keypoint whose descriptor is nearest any reference row."""
+    from landmark_localizer.tracking import _nearest_keypoint
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 41, (12, 2)).astype(np.float32)
+    corner = np.array([100.0, 50.0], np.float32)
+    descriptors = rng.integers(0, 120, (12, 128)).astype(np.float32)
+    reference = rng.integers(0, 120, (3, 128)).astype(np.float32)
+    centre = np.array([120.3, 70.6], np.float32)
+    radius = float(rng.uniform(3, 15))
+    best, distance = _nearest_keypoint(points, corner, descriptors, reference, centre, radius)
+    near = np.linalg.norm(points + corner - centre, axis=1) <= radius
+    d = np.sqrt(((descriptors[:, None].astype(float) - reference[None]) ** 2).sum(-1)).min(1)
+    if not near.any():
+        assert best == -1 and distance == np.inf
+        return
+    expected = np.flatnonzero(near)[np.argmin(d[near])]
+    assert best == expected and distance == pytest.approx(d[expected], rel=1e-12)
 
 
 def test_a_vote_its_points_could_not_judge_is_refused_where_the_absolute_pose_refutes_it(

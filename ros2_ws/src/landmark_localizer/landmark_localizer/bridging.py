@@ -302,13 +302,15 @@ def _intersection(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return 0.5 * (b + b.T)   # a degenerate image covariance claims nothing to keep
     weights = np.linspace(0.0, 1.0, 11)[:, None, None]
     try:   # the eleven weights at once; one by one where one of them is singular
-        joined = list(np.linalg.inv(weights * inverse_a + (1.0 - weights) * inverse_b))
+        joined = np.linalg.inv(weights * inverse_a + (1.0 - weights) * inverse_b)
     except np.linalg.LinAlgError:
-        joined = [_inverse(w * inverse_a + (1.0 - w) * inverse_b) for w in weights]
-    best = a
-    for candidate in joined:
-        if candidate is not None and np.trace(candidate[:2, :2]) < np.trace(best[:2, :2]):
-            best = candidate
+        found = [_inverse(w * inverse_a + (1.0 - w) * inverse_b) for w in weights]
+        joined = np.stack([np.full_like(a, np.nan) if m is None else m for m in found])
+    # The first weight of the smallest position variance, where it is below a's.
+    traces = joined[:, 0, 0] + joined[:, 1, 1]
+    traces[~np.isfinite(traces)] = np.inf
+    k = int(np.argmin(traces))
+    best = joined[k] if traces[k] < a[0, 0] + a[1, 1] else a
     return 0.5 * (best + best.T)
 
 

@@ -20,28 +20,61 @@ on the size of the database.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+import math
 
 import cv2
+from numba import njit
 import numpy as np
 
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.ids import IdTable
 from landmark_localizer.index import DatabaseIndex, RegionData
-from landmark_localizer.matching import squared_distances
 from landmark_localizer.scene_patches import scene_tracker
 
 __all__ = ['Tracker', 'Tracks', 'disc_mask']
 
 
+@njit(cache=True)
 def disc_mask(height: int, width: int, cu: float, cv: float, radius: float) -> np.ndarray:
     """(height, width) uint8 mask: 255 on the pixels within ``radius`` of ``(cu, cv)``.
 
     OpenCV keeps a keypoint when the mask is set at its rounded pixel, so a disc one
     pixel wider than a search radius keeps every keypoint within that radius.
     """
-    du = (np.arange(width) - cu) ** 2
-    dv = (np.arange(height) - cv) ** 2
-    return np.where(dv[:, None] + du[None, :] <= radius * radius, 255, 0).astype(np.uint8)
+    mask = np.zeros((height, width), np.uint8)
+    for y in range(height):
+        dv = (y - cv) ** 2
+        for x in range(width):
+            if dv + (x - cu) ** 2 <= radius * radius:
+                mask[y, x] = 255
+    return mask
+
+
+@njit(cache=True)
+def _nearest_keypoint(points: np.ndarray, corner: np.ndarray, descriptors: np.ndarray,
+                      reference: np.ndarray, centre: np.ndarray, radius: float
+                      ) -> tuple[int, float]:
+    """Return the keypoint within ``radius`` of ``centre`` nearest a reference descriptor.
+
+    ``points``: (k, 2) float32 keypoints in a window whose corner is ``corner`` (float32
+    image pixels, as ``centre``). Returns the keypoint's row and its descriptor distance
+    (to the nearest of ``reference``'s rows), or ``(-1, inf)`` when no keypoint lies
+    within ``radius``. Distances of the float32 descriptors, summed in float64.
+    """
+    best, best_d2 = -1, np.inf
+    for i in range(points.shape[0]):
+        du = (points[i, 0] + corner[0]) - centre[0]
+        dv = (points[i, 1] + corner[1]) - centre[1]
+        if math.sqrt(du * du + dv * dv) > radius:
+            continue
+        for j in range(reference.shape[0]):
+            d2 = 0.0
+            for k in range(descriptors.shape[1]):
+                diff = float(descriptors[i, k]) - float(reference[j, k])
+                d2 += diff * diff
+            if d2 < best_d2:
+                best, best_d2 = i, d2
+    return best, math.sqrt(best_d2)
 
 
 @dataclass
@@ -186,16 +219,14 @@ class Tracker:
             keypoints, descriptors = self.detector.detectAndCompute(gray[y0:y1, x0:x1], mask)
             if not keypoints or descriptors is None:
                 continue
-            pts = np.array([k.pt for k in keypoints], np.float32) + np.array([x0, y0],
-                                                                             np.float32)
-            near = np.linalg.norm(pts - np.array([u, v], np.float32), axis=1) <= radius
-            if not near.any():
-                continue
-            d = np.sqrt(squared_distances(descriptors[near], reference).min(axis=1))
-            best = int(np.argmin(d))
-            if d[best] <= self.config.redetect_max_distance:
+            # The keypoint within the radius whose descriptor is nearest the class's.
+            corner = np.array([x0, y0], np.float32)
+            best, distance = _nearest_keypoint(cv2.KeyPoint_convert(keypoints), corner,
+                                               descriptors, reference,
+                                               np.array([u, v], np.float32), radius)
+            if best >= 0 and distance <= self.config.redetect_max_distance:
                 found_ids.append(int(c))
-                found_uv.append(pts[near][best])
+                found_uv.append(np.asarray(keypoints[best].pt, np.float32) + corner)
         if remember:
             class_ids = np.asarray(class_ids, np.int64)
             self._searched[class_ids[~self._ids.member(class_ids, found_ids)]] = self._frame
