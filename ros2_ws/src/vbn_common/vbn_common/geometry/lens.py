@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 
 import cv2
+from numba import njit
 import numpy as np
 
 __all__ = ['BROWN_MODELS', 'MODELS', 'brown_distort', 'brown_limit', 'brown_undistort',
@@ -106,25 +107,48 @@ def brown_undistort(uv: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndarray:
     d = np.asarray(d, np.float64).reshape(-1)
     xy = cv2.undistortPoints(uv, k, d, criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
     # OpenCV's fixed-point iteration can stall under strong distortion: Newton steps on
-    # the forward mapping (a central-difference Jacobian) finish it.
+    # the forward mapping (a central-difference Jacobian) finish it, compiled.
     target = np.column_stack([(uv[:, 0, 0] - k[0, 2]) / k[0, 0],
                               (uv[:, 0, 1] - k[1, 2]) / k[1, 1]])
+    return _brown_newton(np.ascontiguousarray(xy, float), target,
+                         np.array(_brown_coefficients(d)))
+
+
+@njit(cache=True)
+def _brown_point(x: float, y: float, c: np.ndarray) -> tuple[float, float]:
+    """:func:`brown_distort` of one point, coefficients ``c`` (8,)."""
+    r2 = x * x + y * y
+    radial = (1.0 + r2 * (c[0] + r2 * (c[1] + r2 * c[4]))) / \
+        (1.0 + r2 * (c[5] + r2 * (c[6] + r2 * c[7])))
+    return (x * radial + 2.0 * c[2] * x * y + c[3] * (r2 + 2.0 * x * x),
+            y * radial + c[2] * (r2 + 2.0 * y * y) + 2.0 * c[3] * x * y)
+
+
+@njit(cache=True)
+def _brown_newton(xy: np.ndarray, target: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Newton steps on each point until it distorts within 1e-14 of its target (at most 5)."""
     h = 1e-7
-    for _ in range(5):
-        fx, fy = brown_distort(xy[:, 0], xy[:, 1], d)
-        rx, ry = fx - target[:, 0], fy - target[:, 1]
-        if np.all(np.abs(rx) + np.abs(ry) < 1e-14):
-            break
-        ax, ay = brown_distort(xy[:, 0] + h, xy[:, 1], d)
-        bx, by = brown_distort(xy[:, 0] - h, xy[:, 1], d)
-        cx, cy = brown_distort(xy[:, 0], xy[:, 1] + h, d)
-        ex, ey = brown_distort(xy[:, 0], xy[:, 1] - h, d)
-        j11, j21 = (ax - bx) / (2 * h), (ay - by) / (2 * h)
-        j12, j22 = (cx - ex) / (2 * h), (cy - ey) / (2 * h)
-        det = j11 * j22 - j12 * j21
-        det = np.where(np.abs(det) > 1e-12, det, np.nan)
-        step = np.column_stack([(j22 * rx - j12 * ry) / det, (j11 * ry - j21 * rx) / det])
-        xy = np.where(np.isfinite(step), xy - step, xy)
+    for i in range(xy.shape[0]):
+        x, y = xy[i, 0], xy[i, 1]
+        for _ in range(5):
+            fx, fy = _brown_point(x, y, c)
+            rx, ry = fx - target[i, 0], fy - target[i, 1]
+            if abs(rx) + abs(ry) < 1e-14:
+                break
+            ax, ay = _brown_point(x + h, y, c)
+            bx, by = _brown_point(x - h, y, c)
+            cx, cy = _brown_point(x, y + h, c)
+            ex, ey = _brown_point(x, y - h, c)
+            j11, j21 = (ax - bx) / (2 * h), (ay - by) / (2 * h)
+            j12, j22 = (cx - ex) / (2 * h), (cy - ey) / (2 * h)
+            det = j11 * j22 - j12 * j21
+            if not abs(det) > 1e-12:
+                break
+            sx, sy = (j22 * rx - j12 * ry) / det, (j11 * ry - j21 * rx) / det
+            if not (math.isfinite(sx) and math.isfinite(sy)):
+                break
+            x, y = x - sx, y - sy
+        xy[i, 0], xy[i, 1] = x, y
     return xy
 
 
@@ -152,14 +176,36 @@ def equidistant_theta(theta_d: np.ndarray, d: np.ndarray, limit: float) -> np.nd
     """Return the angle ``theta`` of radius ``theta_d`` (NaN beyond the model's ``limit``).
 
     Newton's iteration from ``theta = theta_d``, kept inside ``[0, limit]``, where the
-    mapping grows, so it converges to the one root there.
+    mapping grows, so it converges to the one root there: each radius until its step is
+    below 1e-13 rad (at most 30 steps), compiled (a vectorised loop cost a fisheye
+    frame's rays 0.3 ms, for a few dozen of them).
     """
     theta_d = np.asarray(theta_d, dtype=float)
-    top = equidistant_theta_d(np.float64(limit), d)
-    theta = np.clip(theta_d, 0.0, limit)
-    for _ in range(30):
-        step = (equidistant_theta_d(theta, d) - theta_d) / _equidistant_slope(theta, d)
-        theta = np.clip(theta - step, 0.0, limit)
-        if np.all(np.abs(step) < 1e-13):
-            break
-    return np.where(theta_d <= top, theta, np.nan)
+    k1, k2, k3, k4 = _padded(d, 4)
+    out = _equidistant_newton(np.ascontiguousarray(theta_d.reshape(-1)), k1, k2, k3, k4,
+                              float(limit))
+    return out.reshape(theta_d.shape)
+
+
+@njit(cache=True)
+def _equidistant_newton(theta_d: np.ndarray, k1: float, k2: float, k3: float, k4: float,
+                        limit: float) -> np.ndarray:
+    t2 = limit * limit
+    top = limit * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    out = np.empty(theta_d.size)
+    for i in range(theta_d.size):
+        target = theta_d[i]
+        if not target <= top:
+            out[i] = np.nan
+            continue
+        theta = min(max(target, 0.0), limit)
+        for _ in range(30):
+            t2 = theta * theta
+            value = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+            slope = 1.0 + t2 * (3 * k1 + t2 * (5 * k2 + t2 * (7 * k3 + t2 * 9 * k4)))
+            step = (value - target) / slope
+            theta = min(max(theta - step, 0.0), limit)
+            if abs(step) < 1e-13:
+                break
+        out[i] = theta
+    return out
