@@ -4,7 +4,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from vbn_common.patch_alignment import _correlations, warp_patches
+from vbn_common.patch_alignment import _correlations, _match_brightness, warp_patches
 
 
 def test_correlations_are_those_of_the_bilinear_sample_at_the_found_pixel() -> None:
@@ -25,6 +25,25 @@ def test_correlations_are_those_of_the_bilinear_sample_at_the_found_pixel() -> N
     ramps = np.repeat(ramp[None], 3, axis=0)
     offsets = np.array([[21.0, 21.0], [21.5, 20.25], [18.3, 23.9]], np.float32)
     np.testing.assert_allclose(_correlations(ramps, offsets, ramps, side), 1.0, atol=1e-5)
+
+
+def test_matched_templates_take_their_crops_mean_and_contrast_on_the_central_square() -> None:
+    rng = np.random.default_rng(4)
+    n, tile, size, side = 6, 41, 31, 21
+    crops = rng.uniform(0, 255, (n, tile, tile)).astype(np.float32)
+    templates = rng.uniform(50, 90, (n, size, size)).astype(np.float32)
+    templates[0] = 70.0    # flat: its contrast counts as 1 (no division by zero)
+    out = _match_brightness(templates, crops, side)
+    inner = out[:, 5:26, 5:26]
+    outer = crops[:, 10:31, 10:31]
+    np.testing.assert_allclose(inner.mean(axis=(1, 2)), outer.mean(axis=(1, 2)), rtol=1e-5)
+    np.testing.assert_allclose(inner[1:].std(axis=(1, 2)), outer[1:].std(axis=(1, 2)),
+                               rtol=1e-4)
+    np.testing.assert_allclose(out[0], outer[0].mean(), rtol=1e-5)
+    # The whole template moves with its square: one gain and offset for every pixel.
+    gain = (out[1, 0, 0] - out[1, 0, 1]) / (templates[1, 0, 0] - templates[1, 0, 1])
+    np.testing.assert_allclose(out[1] - out[1, 5, 5], gain * (templates[1] - templates[1, 5, 5]),
+                               atol=1e-3)
 
 
 def test_warp_is_opencv_warp_affine_of_each_patch() -> None:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 import cv2
+from numba import njit
 import numpy as np
 
 __all__ = ['MARGIN_PX', 'align_patches', 'image_tiles', 'patch_maps', 'tile_mosaic',
@@ -177,18 +178,48 @@ def _match_brightness(templates: np.ndarray, crops: np.ndarray, side: int) -> np
     """Templates brought to their crops' mean and contrast over the central ``side`` square.
 
     The templates and the crops are centred squares, of any sizes of at least ``side``.
+    Compiled (:func:`_brightness_kernel`): as numpy calls, a fifth of a millisecond for
+    75 tiles.
     """
+    return _brightness_kernel(np.ascontiguousarray(templates, np.float32),
+                              np.ascontiguousarray(crops, np.float32), side)
+
+
+@njit(cache=True)
+def _square_moments(tiles: np.ndarray, i: int, lo: int, side: int) -> tuple[float, float]:
+    """Mean and standard deviation of tile ``i``'s ``side`` square from ``(lo, lo)``."""
+    total = 0.0
+    for y in range(lo, lo + side):
+        for x in range(lo, lo + side):
+            total += tiles[i, y, x]
+    mean = total / (side * side)
+    spread = 0.0
+    for y in range(lo, lo + side):
+        for x in range(lo, lo + side):
+            spread += (tiles[i, y, x] - mean) ** 2
+    return mean, math.sqrt(spread / (side * side))
+
+
+@njit(cache=True)
+def _brightness_kernel(templates: np.ndarray, crops: np.ndarray, side: int) -> np.ndarray:
     lo, at = (templates.shape[1] - side) // 2, (crops.shape[1] - side) // 2
-    inner = templates[:, lo:lo + side, lo:lo + side]
-    outer = crops[:, at:at + side, at:at + side]
-    mean_t, mean_c = inner.mean(axis=(1, 2)), outer.mean(axis=(1, 2))
-    gain = outer.std(axis=(1, 2)) / np.maximum(inner.std(axis=(1, 2)), 1.0)
-    return (templates - mean_t[:, None, None]) * gain[:, None, None] + mean_c[:, None, None]
+    out = np.empty_like(templates)
+    for i in range(templates.shape[0]):
+        mean_t, std_t = _square_moments(templates, i, lo, side)
+        mean_c, std_c = _square_moments(crops, i, at, side)
+        gain = std_c / max(std_t, 1.0)
+        for y in range(templates.shape[1]):
+            for x in range(templates.shape[2]):
+                out[i, y, x] = (templates[i, y, x] - mean_t) * gain + mean_c
+    return out
 
 
 def _correlations(crops: np.ndarray, at: np.ndarray, templates: np.ndarray, side: int
                   ) -> np.ndarray:
     """Normalised correlation of each template's central square with its crop at ``at``.
+
+    The crop is sampled bilinearly (its edge repeated beyond it). Compiled
+    (:func:`_correlation_kernel`).
 
     Args:
         crops: ``(n, t, t)`` the image's tiles.
@@ -196,31 +227,43 @@ def _correlations(crops: np.ndarray, at: np.ndarray, templates: np.ndarray, side
         templates: ``(n, s, s)`` the warped patches, centred (``s`` odd, at least ``side``).
         side: The side of the compared square (odd).
     """
-    n, tile = crops.shape[:2]
-    if not n:
+    if not len(crops):
         return np.zeros(0)
+    return _correlation_kernel(np.ascontiguousarray(crops, np.float32),
+                               np.ascontiguousarray(at, np.float64),
+                               np.ascontiguousarray(templates, np.float32), side)
+
+
+@njit(cache=True)
+def _correlation_kernel(crops: np.ndarray, at: np.ndarray, templates: np.ndarray, side: int
+                        ) -> np.ndarray:
+    n, tile = crops.shape[0], crops.shape[1]
     lo = (templates.shape[1] - side) // 2
-    base = np.floor(at)
-    fx, fy = (at - base).T
-    # One gather of each square and its next row and column (the tile's edge repeated
-    # beyond it), then the bilinear blend.
-    first = base.astype(np.int64) - side // 2
-    inside = np.all((first >= 0) & (first + side + 1 <= tile), axis=1)
-    block = np.empty((n, side + 1, side + 1), crops.dtype)
-    block[inside] = np.lib.stride_tricks.sliding_window_view(
-        crops, (side + 1, side + 1), axis=(1, 2))[np.flatnonzero(inside), first[inside, 1],
-                                                  first[inside, 0]]
-    if not inside.all():
-        reach = np.arange(side + 1)
-        x = np.clip(first[~inside, 0, None] + reach, 0, tile - 1)   # (m, side + 1)
-        y = np.clip(first[~inside, 1, None] + reach, 0, tile - 1)
-        block[~inside] = crops[np.flatnonzero(~inside)[:, None, None], y[:, :, None],
-                               x[:, None, :]]
-    fx, fy = fx[:, None, None], fy[:, None, None]
-    across = block[:, :, :-1] * (1 - fx) + block[:, :, 1:] * fx
-    sample = (across[:, :-1] * (1 - fy) + across[:, 1:] * fy).reshape(n, -1)
-    ref = templates[:, lo:lo + side, lo:lo + side].reshape(n, -1)
-    a = sample - sample.mean(axis=1, keepdims=True)
-    b = ref - ref.mean(axis=1, keepdims=True)
-    return np.einsum('ij,ij->i', a, b) / np.maximum(
-        np.sqrt(np.einsum('ij,ij->i', a, a) * np.einsum('ij,ij->i', b, b)), 1e-9)
+    out = np.empty(n)
+    sample = np.empty((side, side))
+    for i in range(n):
+        bx, by = math.floor(at[i, 0]), math.floor(at[i, 1])
+        fx, fy = at[i, 0] - bx, at[i, 1] - by
+        x0, y0 = int(bx) - side // 2, int(by) - side // 2
+        mean_s, mean_r = 0.0, 0.0
+        for y in range(side):
+            ya, yb = min(max(y0 + y, 0), tile - 1), min(max(y0 + y + 1, 0), tile - 1)
+            for x in range(side):
+                xa, xb = min(max(x0 + x, 0), tile - 1), min(max(x0 + x + 1, 0), tile - 1)
+                top = crops[i, ya, xa] * (1 - fx) + crops[i, ya, xb] * fx
+                bottom = crops[i, yb, xa] * (1 - fx) + crops[i, yb, xb] * fx
+                sample[y, x] = top * (1 - fy) + bottom * fy
+                mean_s += sample[y, x]
+                mean_r += templates[i, lo + y, lo + x]
+        mean_s /= side * side
+        mean_r /= side * side
+        ab, aa, bb = 0.0, 0.0, 0.0
+        for y in range(side):
+            for x in range(side):
+                a = sample[y, x] - mean_s
+                b = templates[i, lo + y, lo + x] - mean_r
+                ab += a * b
+                aa += a * a
+                bb += b * b
+        out[i] = ab / max(math.sqrt(aa * bb), 1e-9)
+    return out
