@@ -175,3 +175,29 @@ def test_angular_errors_are_the_angles_at_the_tilted_state(seed: int) -> None:
     level /= np.linalg.norm(level, axis=1, keepdims=True)
     turned = level @ tilt_rotation(state[3], state[4])   # R^T: the rays the tilt sees
     assert angular_errors(state, turned, points).max() < 1e-12
+
+
+def test_coarse_inliers_are_the_numpy_definitions() -> None:
+    """Azimuth, elevation with the tilt and height slack, in front: against numpy."""
+    from landmark_localizer.absolute_pose import _coarse_inliers, _predicted
+
+    rng = np.random.default_rng(12)
+    poses = np.column_stack([rng.uniform(-1, 1, (7, 2)), rng.uniform(-np.pi, np.pi, 7)])
+    points = rng.uniform(-4, 4, (50, 3))
+    rays = _predicted(poses[:1], points)[0] + rng.normal(0, 0.02, (50, 3))
+    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+    threshold, tilt, height = 0.02, 0.005, 0.05
+    v = _predicted(poses, points)
+    azimuth = np.arctan2(v[..., 1], v[..., 0]) - np.arctan2(rays[:, 1], rays[:, 0])
+    azimuth = np.abs((azimuth + math.pi) % (2 * math.pi) - math.pi)
+    horizontal = np.hypot(v[..., 0], v[..., 1])
+    elevation = np.abs(np.arctan2(v[..., 2], horizontal)
+                       - np.arctan2(rays[:, 2], np.hypot(rays[:, 0], rays[:, 1])))
+    distance = np.hypot(points[None, :, 0] - poses[:, None, 0],
+                        points[None, :, 1] - poses[:, None, 1])
+    slack = threshold + 3.0 * tilt + 3.0 * height / np.maximum(distance, 0.5)
+    expected = (azimuth * horizontal <= threshold) & (elevation <= slack) & \
+        (np.einsum('mnk,nk->mn', v, rays) > 0)
+    got = _coarse_inliers(poses, rays, points, threshold, tilt, height)
+    assert got.shape == (7, 50) and np.array_equal(got, expected)
+    assert 10 < got[0].sum() < 50   # the first pose explains most of its noisy rays

@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from landmark_localizer.angular_kernels import gauss_newton, normal_equations
+from landmark_localizer.angular_kernels import coarse_inliers, gauss_newton, normal_equations
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.index import DatabaseIndex, tilt_rotation
 from landmark_localizer.pose import PoseSolution
@@ -161,19 +161,11 @@ def _coarse_inliers(poses: np.ndarray, rays: np.ndarray, points: np.ndarray,
     The bearing (azimuth) within ``threshold``; the elevation within ``threshold``
     plus three prior deviations of the frame's tilt and of its height offset seen at
     the point's distance (a pitch of half a degree moves every ray more than a
-    threshold of a few pixels).
+    threshold of a few pixels). Compiled (:func:`.angular_kernels.coarse_inliers`).
     """
-    v = _predicted(poses, points)
-    azimuth = np.arctan2(v[..., 1], v[..., 0]) - np.arctan2(rays[:, 1], rays[:, 0])
-    azimuth = np.abs((azimuth + math.pi) % (2 * math.pi) - math.pi)
-    horizontal = np.hypot(v[..., 0], v[..., 1])
-    elevation = np.abs(np.arctan2(v[..., 2], horizontal)
-                       - np.arctan2(rays[:, 2], np.hypot(rays[:, 0], rays[:, 1])))
-    distance = np.hypot(points[None, :, 0] - poses[:, None, 0],
-                        points[None, :, 1] - poses[:, None, 1])
-    slack = threshold + 3.0 * tilt_prior + 3.0 * height_prior / np.maximum(distance, 0.5)
-    return (azimuth * horizontal <= threshold) & (elevation <= slack) & \
-        (np.einsum('mnk,nk->mn', v, rays) > 0)
+    return coarse_inliers(np.ascontiguousarray(poses, float), np.ascontiguousarray(rays, float),
+                          np.ascontiguousarray(points, float), float(threshold),
+                          float(tilt_prior), float(height_prior))
 
 
 def _residuals(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> np.ndarray:

@@ -20,8 +20,8 @@ import math
 from numba import njit
 import numpy as np
 
-__all__ = ['SINGULAR', 'angular_errors', 'gauss_newton', 'linearise', 'normal_equations',
-           'solve_in_place']
+__all__ = ['SINGULAR', 'angular_errors', 'coarse_inliers', 'gauss_newton', 'linearise',
+           'normal_equations', 'solve_in_place']
 
 #: OpenCV's LU (``DECOMP_LU``) calls a pivot this small singular.
 SINGULAR = 100.0 * np.finfo(float).eps
@@ -83,6 +83,39 @@ def angular_errors(state: np.ndarray, rays: np.ndarray, points: np.ndarray) -> n
         # |t - u|^2 = 2 - 2 t.u for unit t and u (the turned ray and the direction).
         squared = res[0] * res[0] + res[1] * res[1] + res[2] * res[2]
         out[i] = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(squared)))
+    return out
+
+
+@njit(cache=True)
+def coarse_inliers(poses: np.ndarray, rays: np.ndarray, points: np.ndarray, threshold: float,
+                   tilt_prior: float, height_prior: float) -> np.ndarray:
+    """(m, n) bool: the rays each planar pose ``(x, y, yaw)`` explains, its tilt unknown.
+
+    :func:`~landmark_localizer.absolute_pose._coarse_inliers`: the azimuth within
+    ``threshold`` (as an arc at the ray's horizontal length), the elevation within
+    ``threshold`` plus three tilt priors and three height priors at the point's
+    distance (at least 0.5 m), the point in front.
+    """
+    m, n = poses.shape[0], rays.shape[0]
+    out = np.empty((m, n), np.bool_)
+    two_pi = 2.0 * math.pi
+    for j in range(n):
+        ray_azimuth = math.atan2(rays[j, 1], rays[j, 0])
+        ray_elevation = math.atan2(rays[j, 2], math.hypot(rays[j, 0], rays[j, 1]))
+        for i in range(m):
+            c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+            dx, dy = points[j, 0] - poses[i, 0], points[j, 1] - poses[i, 1]
+            v0, v1, v2 = c * dx + s * dy, -s * dx + c * dy, points[j, 2]
+            norm = max(math.sqrt(v0 * v0 + v1 * v1 + v2 * v2), 1e-12)
+            v0, v1, v2 = v0 / norm, v1 / norm, v2 / norm
+            azimuth = math.atan2(v1, v0) - ray_azimuth
+            azimuth = abs((azimuth + math.pi) % two_pi - math.pi)
+            horizontal = math.hypot(v0, v1)
+            elevation = abs(math.atan2(v2, horizontal) - ray_elevation)
+            slack = threshold + 3.0 * tilt_prior + 3.0 * height_prior / max(
+                math.hypot(dx, dy), 0.5)
+            out[i, j] = azimuth * horizontal <= threshold and elevation <= slack and \
+                v0 * rays[j, 0] + v1 * rays[j, 1] + v2 * rays[j, 2] > 0
     return out
 
 

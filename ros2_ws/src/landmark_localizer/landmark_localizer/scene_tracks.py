@@ -285,11 +285,13 @@ class SceneTracks:
         Emptiest cells first: a candidate ranks by its cell's ``kept`` points plus the
         candidates of its cell before it (those seen from nearer).
         """
-        uv, visible = self.index.project_points(camera_pose, self.index.scene_xyz[candidates])
-        candidates, uv = candidates[visible], uv[visible]
+        n = len(candidates)   # the candidates and the kept points in one projection
+        uv, visible = self.index.project_points(
+            camera_pose, self.index.scene_xyz[np.concatenate([candidates, kept])])
+        mine, seen = uv[n:], visible[n:]
+        candidates, uv = candidates[visible[:n]], uv[:n][visible[:n]]
         occupied = np.zeros(CELLS[0] * CELLS[1])
         if len(kept):
-            mine, seen = self.index.project_points(camera_pose, self.index.scene_xyz[kept])
             np.add.at(occupied, self._cell(mine[seen], w, h), 1)
         cell = self._cell(uv, w, h)
         order = np.argsort(cell, kind='stable')

@@ -67,15 +67,25 @@ def tile_mosaic(tiles: np.ndarray, cols: int, cell: int | None = None) -> np.nda
     """``(n, s, s)`` tiles laid row by row on a ``cols x cols`` grid, as one uint8 image.
 
     ``cell``: the grid's spacing (odd, at least ``s``; the tiles centred in their cells,
-    zero around them), or None for ``s``.
+    zero around them), or None for ``s``. Values rounded half to even and clipped to
+    ``[0, 255]``.
     """
-    n, size = len(tiles), tiles.shape[1]
+    size = tiles.shape[1]
     cell = size if cell is None else cell
+    return _mosaic(np.ascontiguousarray(tiles, np.float32), int(cols), int(cell))
+
+
+@njit(cache=True)
+def _mosaic(tiles: np.ndarray, cols: int, cell: int) -> np.ndarray:
+    size = tiles.shape[1]
     lo = (cell - size) // 2
-    grid = np.zeros((cols * cols, cell, cell), np.float32)
-    grid[:n, lo:lo + size, lo:lo + size] = tiles
-    grid = grid.reshape(cols, cols, cell, cell).transpose(0, 2, 1, 3)
-    return np.clip(np.rint(grid.reshape(cols * cell, cols * cell)), 0, 255).astype(np.uint8)
+    out = np.zeros((cols * cell, cols * cell), np.uint8)
+    for i in range(tiles.shape[0]):
+        top, left = (i // cols) * cell + lo, (i % cols) * cell + lo
+        for y in range(size):
+            for x in range(size):
+                out[top + y, left + x] = np.uint8(min(max(np.rint(tiles[i, y, x]), 0.0), 255.0))
+    return out
 
 
 def warp_patches(patches: np.ndarray, maps: np.ndarray, tile: int) -> np.ndarray:
