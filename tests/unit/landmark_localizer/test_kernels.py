@@ -201,3 +201,18 @@ def test_coarse_inliers_are_the_numpy_definitions() -> None:
     got = _coarse_inliers(poses, rays, points, threshold, tilt, height)
     assert got.shape == (7, 50) and np.array_equal(got, expected)
     assert 10 < got[0].sum() < 50   # the first pose explains most of its noisy rays
+
+
+def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
+    from landmark_localizer import angular_kernels, planar_kernels, tracking
+    from landmark_localizer.compiled import warm_up
+    from vbn_common import patch_alignment
+    from vbn_common.geometry import lens
+
+    warm_up()
+    kernels = [angular_kernels.gauss_newton, angular_kernels.normal_equations,
+               angular_kernels.angular_errors, angular_kernels.coarse_inliers,
+               planar_kernels.refine_planar, tracking.disc_mask, tracking._nearest_keypoint,
+               lens._equidistant_newton, lens._brown_newton, patch_alignment._brightness_kernel,
+               patch_alignment._correlation_kernel, patch_alignment._mosaic]
+    assert [k.py_func.__name__ for k in kernels if not k.signatures] == []

@@ -35,6 +35,7 @@ import numpy as np
 from landmark_db.database import LandmarkDatabase
 from landmark_localizer.absolute_pose import absolute_solution
 from landmark_localizer.bridging import BridgeModel, OdometryBridge, search_prior
+from landmark_localizer.compiled import warm_up
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
 from landmark_localizer.frames import Estimate, Frame, Stats, exposed
@@ -93,6 +94,7 @@ class Localizer:
         self.balance = SourceBalance()  # tracked features against scene points
         self.bridge = OdometryBridge()
         self.rng = np.random.default_rng(config.seed)
+        warm_up()   # the compiled kernels loaded now, not on the first tracked frames
         self.stats = Stats()
         self.health = RegionHealth()  # per-region landmark failures over the run
         self.state = LOST
@@ -114,9 +116,7 @@ class Localizer:
         self.predictor.reset()
         self.bridge.reset()
         self.map_search.reset()
-        self._failures = 0
-        self._handover = -1
-        self._last_camera = None
+        self._failures, self._handover, self._last_camera = 0, -1, None
         self.stats.resets += 1
 
     def set_config(self, config: LocalizerConfig) -> None:
