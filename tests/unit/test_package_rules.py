@@ -38,7 +38,7 @@ KEYS = {
     'yaml': 'python3-yaml', 'matplotlib': 'python3-matplotlib', 'tqdm': 'python3-tqdm',
     'rosbags': 'python3-rosbags-pip', 'mcap': 'mcap-ros2-support', 'rclpy': 'rclpy',
     'ament_index_python': 'ament_index_python', 'skimage': 'python3-skimage',
-    'ruamel': 'python3-ruamel.yaml',
+    'ruamel': 'python3-ruamel.yaml', 'numba': 'python3-numba',
     'lz4': None, 'zstandard': None,   # rosbags' own dependencies (python3-rosbags-pip)
     'evo': None,            # the localizer's benchmark: evo_ape beside our accuracy
     'pycolmap': None,       # the benchmark's structure-based peer (requirements.txt pins it)
