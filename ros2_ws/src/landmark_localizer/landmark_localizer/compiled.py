@@ -19,7 +19,7 @@ from landmark_localizer.angular_kernels import (
 from landmark_localizer.planar_kernels import refine_planar
 from landmark_localizer.tracking import _nearest_keypoint, disc_mask
 from vbn_common.geometry import lens
-from vbn_common.patch_alignment import _correlations, _match_brightness, tile_mosaic
+from vbn_common.patch_alignment import _correlations, _match_brightness, tile_mosaic, warp_patches
 
 __all__ = ['warm_up']
 
@@ -45,3 +45,4 @@ def warm_up() -> None:
     _match_brightness(tiles, tiles, 3)
     _correlations(tiles, np.full((1, 2), 2.0, np.float32), tiles, 3)
     tile_mosaic(tiles, 1)
+    warp_patches(np.zeros((1, 3, 3), np.uint8), np.eye(2)[None], 5)

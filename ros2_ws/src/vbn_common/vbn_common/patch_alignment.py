@@ -109,21 +109,38 @@ def warp_patches(patches: np.ndarray, maps: np.ndarray, tile: int) -> np.ndarray
     det = maps[:, 0, 0] * maps[:, 1, 1] - maps[:, 0, 1] * maps[:, 1, 0]
     scale = np.divide(1.0, det, out=np.zeros_like(det), where=det != 0)
     inverse = (np.stack([maps[:, 1, 1], -maps[:, 0, 1], -maps[:, 1, 0], maps[:, 0, 0]], 1)
-               * scale[:, None]).astype(np.float32)[:, :, None, None]
-    step = np.arange(tile, dtype=np.float32) - tile // 2
-    right, down = step[None, None, :], step[None, :, None]
-    centre = (side - 1) / 2
-    source = np.empty((n, tile, tile, 2), np.float32)
-    np.clip(inverse[:, 0] * right + (inverse[:, 1] * down + centre), 0, side - 1,
-            out=source[..., 0])
-    np.clip(inverse[:, 2] * right + (inverse[:, 3] * down + centre), 0, side - 1,
-            out=source[..., 1])
-    source[..., 1] += (np.arange(n, dtype=np.float32) * side)[:, None, None]
+               * scale[:, None]).astype(np.float32)
+    source = _remap_sources(inverse, tile, side)
     # One remap over the patches stacked in a column: one call instead of one a patch.
     out = cv2.remap(np.ascontiguousarray(patches).reshape(n * side, side),
                     source.reshape(n * tile, tile, 2), None, cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_REPLICATE)
     return out.reshape(n, tile, tile).astype(np.float32)
+
+
+@njit(cache=True)
+def _remap_sources(inverse: np.ndarray, tile: int, side: int) -> np.ndarray:
+    """``(n, tile, tile, 2)`` float32: each tile pixel's source in the stacked patches.
+
+    The inverse map ``(a, b; c, d)`` of patch ``i`` (``inverse[i]``) takes the pixel
+    ``(right, down)`` from the tile's centre to ``(a right + b down, c right + d down)``
+    from the patch's centre, clamped to the patch, ``i`` patches down the stack; in
+    float32, as numpy's broadcast computed it.
+    """
+    n = inverse.shape[0]
+    centre, top = np.float32((side - 1) / 2), np.float32(side - 1)
+    zero, half = np.float32(0.0), tile // 2
+    source = np.empty((n, tile, tile, 2), np.float32)
+    for i in range(n):
+        a, b, c, d = inverse[i, 0], inverse[i, 1], inverse[i, 2], inverse[i, 3]
+        below = np.float32(i) * np.float32(side)
+        for y in range(tile):
+            down = np.float32(y - half)
+            for x in range(tile):
+                right = np.float32(x - half)
+                source[i, y, x, 0] = min(max(a * right + (b * down + centre), zero), top)
+                source[i, y, x, 1] = min(max(c * right + (d * down + centre), zero), top) + below
+    return source
 
 
 def align_patches(image: np.ndarray, patches: np.ndarray, uv: np.ndarray, maps: np.ndarray,
