@@ -24,6 +24,17 @@ def _unit(rng: np.random.Generator, n: int) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+def _ray_problem(seed: int, n: int) -> tuple[np.random.Generator, np.ndarray, np.ndarray,
+                                             np.ndarray]:
+    """``(rng, points, rays, state)``: random points and rays, a state with tilt and height."""
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(-3, 3, (n, 3))
+    rays = _unit(rng, n)
+    state = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi),
+                  rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)]
+    return rng, points, rays, state
+
+
 def test_the_small_solver_matches_lapack_and_reports_a_singular_matrix() -> None:
     rng = np.random.default_rng(3)
     for n in (3, 4, 6):
@@ -66,11 +77,7 @@ def _numpy_normal_equations(state, rays, points, threshold, weights):
 @given(st.integers(0, 10**6))
 def test_the_normal_equations_are_the_huber_weighted_least_squares_ones(seed: int) -> None:
     """J^T W J, J^T W r and the weighted squares, with J by central differences."""
-    rng = np.random.default_rng(seed)
-    points = rng.uniform(-3, 3, (15, 3))
-    rays = _unit(rng, 15)
-    state = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi),
-                  rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)]
+    rng, points, rays, state = _ray_problem(seed, 15)
     weights = rng.uniform(0.2, 2.0, 15)
     threshold = 0.3   # some rays within it (weight 1), some beyond (Huber)
     hessian, gradient = np.empty((6, 6)), np.empty(6)
@@ -159,11 +166,7 @@ def test_angular_errors_are_the_angles_at_the_tilted_state(seed: int) -> None:
     from landmark_localizer.angular_kernels import angular_errors
     from landmark_localizer.index import tilt_rotation
 
-    rng = np.random.default_rng(seed)
-    points = rng.uniform(-3, 3, (20, 3))
-    rays = _unit(rng, 20)
-    state = np.r_[rng.uniform(-1, 1, 2), rng.uniform(-np.pi, np.pi),
-                  rng.uniform(-0.1, 0.1, 2), rng.uniform(-0.2, 0.2)]
+    _, points, rays, state = _ray_problem(seed, 20)
     expected = _angular_errors(state[None, :3], rays @ tilt_rotation(state[3], state[4]).T,
                                points - [0.0, 0.0, state[5]])[0]
     np.testing.assert_allclose(angular_errors(state, rays, points), expected, atol=1e-9)
