@@ -216,7 +216,8 @@ def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
     kernels = [angular_kernels.gauss_newton, angular_kernels.normal_equations,
                angular_kernels.angular_errors, angular_kernels.coarse_inliers,
                planar_kernels.refine_planar, tracking.disc_mask, tracking._nearest_keypoint,
-               lens._equidistant_newton, lens._brown_newton, patch_alignment._brightness_kernel,
+               lens._equidistant_newton, lens._brown_newton, lens._brown_project,
+               patch_alignment._brightness_kernel,
                patch_alignment._correlation_kernel, patch_alignment._mosaic,
                patch_alignment._remap_sources]
     assert [k.py_func.__name__ for k in kernels if not k.signatures] == []

@@ -123,3 +123,23 @@ def test_planar_motion_from_distorted_pixels(kind, distortion) -> None:
     motion = relative_motion(uv_model[both], uv_current[both], camera, rng=0)
     assert motion.theta == pytest.approx(theta, abs=1e-6)
     assert motion.direction[:2] == pytest.approx(t / np.linalg.norm(t), abs=1e-6)
+
+
+def test_compiled_brown_projection_is_the_numpy_arithmetic() -> None:
+    """Point by point the values of brown_distort on (X / Z, Y / Z), behind the camera too."""
+    from vbn_common.geometry.lens import brown_distort, brown_limit, brown_project
+
+    rng = np.random.default_rng(9)
+    d = np.array([-0.28, 0.09, 0.001, -0.0005, -0.012])
+    points = np.column_stack([rng.uniform(-2, 2, (200, 2)), rng.uniform(-0.5, 3, 200)])
+    points[:3, 2] = 0.0   # in the camera's plane: infinite or undefined
+    limit = brown_limit(d)
+    uv, valid = brown_project(points, 500.0, 501.0, 319.5, 239.5, d, limit)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        x, y = points[:, 0] / points[:, 2], points[:, 1] / points[:, 2]
+        xd, yd = brown_distort(x, y, d)
+        expected = np.column_stack([319.5 + 500.0 * xd, 239.5 + 501.0 * yd])
+        expected_valid = (points[:, 2] > 0) & (np.hypot(x, y) <= limit)
+    np.testing.assert_array_equal(valid, expected_valid)
+    np.testing.assert_array_equal(uv[valid], expected[valid])
+    assert 0 < valid.sum() < 200

@@ -381,13 +381,15 @@ class PinholeCamera(CameraModel):
         distortion stops growing (:func:`~.lens.brown_limit`) are invalid.
         """
         points = np.asarray(points, dtype=float).reshape(-1, 3)
+        if self.distorted:   # compiled: a dozen numpy calls for a few dozen points
+            uv, valid = lens.brown_project(np.ascontiguousarray(points), self.fx, self.fy,
+                                           self.cx, self.cy, np.asarray(self.d, float),
+                                           self._limit)  # type: ignore[attr-defined]
+            return uv, valid & self._inside(uv)
         z = points[:, 2]
         with np.errstate(divide='ignore', invalid='ignore'):
             x, y = points[:, 0] / z, points[:, 1] / z
             valid = z > 0
-            if self.distorted:
-                valid &= np.hypot(x, y) <= self._limit  # type: ignore[attr-defined]
-                x, y = lens.brown_distort(x, y, np.asarray(self.d))
             uv = np.stack([self.cx + self.fx * x, self.cy + self.fy * y], axis=1)
         return uv, valid & self._inside(uv)
 

@@ -39,8 +39,8 @@ import cv2
 from numba import njit
 import numpy as np
 
-__all__ = ['BROWN_MODELS', 'MODELS', 'brown_distort', 'brown_limit', 'brown_undistort',
-           'coefficient_count', 'equidistant_limit', 'equidistant_theta',
+__all__ = ['BROWN_MODELS', 'MODELS', 'brown_distort', 'brown_limit', 'brown_project',
+           'brown_undistort', 'coefficient_count', 'equidistant_limit', 'equidistant_theta',
            'equidistant_theta_d']
 
 #: Distortion models on normalised coordinates, with their coefficient counts.
@@ -74,6 +74,30 @@ def brown_distort(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> tuple[np.ndarr
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
     return xd, yd
+
+
+def brown_project(points: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                  d: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels ``(n, 2)`` of optical-frame points through Brown's distortion, and validity.
+
+    ``valid``: in front (``Z > 0``) and within the undistorted radius ``limit``
+    (:func:`brown_limit`); the image's bounds are the camera's to check. The same
+    arithmetic as :func:`brown_distort` on ``(X / Z, Y / Z)``, point by point, compiled.
+    """
+    return _brown_project(points, fx, fy, cx, cy, np.array(_brown_coefficients(d)), limit)
+
+
+@njit(cache=True, error_model='numpy')
+def _brown_project(points: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                   c: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
+    n = points.shape[0]
+    uv, valid = np.empty((n, 2)), np.empty(n, np.bool_)
+    for i in range(n):
+        x, y = points[i, 0] / points[i, 2], points[i, 1] / points[i, 2]
+        valid[i] = points[i, 2] > 0 and math.hypot(x, y) <= limit
+        xd, yd = _brown_point(x, y, c)
+        uv[i, 0], uv[i, 1] = cx + fx * xd, cy + fy * yd
+    return uv, valid
 
 
 def brown_limit(d: np.ndarray, r_max: float = 10.0) -> float:
@@ -114,7 +138,7 @@ def brown_undistort(uv: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndarray:
                          np.array(_brown_coefficients(d)))
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _brown_point(x: float, y: float, c: np.ndarray) -> tuple[float, float]:
     """:func:`brown_distort` of one point, coefficients ``c`` (8,)."""
     r2 = x * x + y * y
