@@ -215,7 +215,8 @@ class Tracker:
             self.windows += 1
             # Descriptors only of the keypoints near the prediction: the rest of the
             # window is there for the pyramid, and describing it cost most of a search.
-            mask = disc_mask(y1 - y0, x1 - x0, u - x0, v - y0, radius + 1.0)
+            mask = disc_mask(y1 - y0, x1 - x0, float(u - x0), float(v - y0),
+                             float(radius) + 1.0)   # one compiled signature
             keypoints, descriptors = self.detector.detectAndCompute(gray[y0:y1, x0:x1], mask)
             if not keypoints or descriptors is None:
                 continue
@@ -223,7 +224,7 @@ class Tracker:
             corner = np.array([x0, y0], np.float32)
             best, distance = _nearest_keypoint(cv2.KeyPoint_convert(keypoints), corner,
                                                descriptors, reference,
-                                               np.array([u, v], np.float32), radius)
+                                               np.array([u, v], np.float32), float(radius))
             if best >= 0 and distance <= self.config.redetect_max_distance:
                 found_ids.append(int(c))
                 found_uv.append(np.asarray(keypoints[best].pt, np.float32) + corner)

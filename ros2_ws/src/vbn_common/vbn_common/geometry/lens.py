@@ -211,7 +211,7 @@ def equidistant_theta(theta_d: np.ndarray, d: np.ndarray, limit: float) -> np.nd
     return out.reshape(theta_d.shape)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def _equidistant_newton(theta_d: np.ndarray, k1: float, k2: float, k3: float, k4: float,
                         limit: float) -> np.ndarray:
     t2 = limit * limit
