@@ -21,14 +21,14 @@ from numba import njit
 import numpy as np
 
 __all__ = ['SINGULAR', 'angular_errors', 'coarse_inliers', 'gauss_newton', 'linearise',
-           'normal_equations', 'solve_in_place']
+           'normal_equations', 'solve_in_place', 'wrap']
 
 #: OpenCV's LU (``DECOMP_LU``) calls a pivot this small singular.
 SINGULAR = 100.0 * np.finfo(float).eps
 
 
 @njit(cache=True)
-def _wrap(angle: float) -> float:
+def wrap(angle: float) -> float:
     """``angle`` in ``[-pi, pi)`` (:func:`vbn_common.geometry.frames.wrap_angle`)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
@@ -214,7 +214,7 @@ def gauss_newton(state: np.ndarray, rays: np.ndarray, points: np.ndarray, thresh
         for i in range(k):
             offset = state[free[i]] - centre[free[i]]
             if i == 2:
-                offset = _wrap(offset)
+                offset = wrap(offset)
             b[i] = -(gradient[free[i]] + prior_info[i] * offset)
             for j in range(k):
                 a[i, j] = hessian[free[i], free[j]]
@@ -223,7 +223,7 @@ def gauss_newton(state: np.ndarray, rays: np.ndarray, points: np.ndarray, thresh
             return -1
         for i in range(k):
             state[free[i]] += b[i]
-        state[2] = _wrap(state[2])
+        state[2] = wrap(state[2])
         steps += 1
         if not math.isfinite(state.sum()):
             return -1

@@ -16,7 +16,7 @@ import math
 from numba import njit
 import numpy as np
 
-from landmark_localizer.angular_kernels import solve_in_place
+from landmark_localizer.angular_kernels import solve_in_place, wrap
 
 __all__ = ['planar_residuals', 'refine_planar']
 
@@ -42,7 +42,7 @@ def planar_residuals(pose: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
     for k in range(m):
         c, s = math.cos(view_poses[k, 2]), math.sin(view_poses[k, 2])
         dx, dy = pose[0] - view_poses[k, 0], pose[1] - view_poses[k, 1]
-        theta = (pose[2] - view_poses[k, 2] + math.pi) % (2.0 * math.pi) - math.pi
+        theta = wrap(pose[2] - view_poses[k, 2])
         phi = math.atan2(-s * dx + c * dy, c * dx + s * dy)
         cos_t[k], sin_t[k] = math.cos(theta), math.sin(theta)
         tx[k], ty[k] = -math.cos(phi - theta), -math.sin(phi - theta)
@@ -99,7 +99,7 @@ def refine_planar(pose: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
             return False
         for j in range(3):
             pose[j] += b[j]
-        pose[2] = (pose[2] + math.pi) % (2.0 * math.pi) - math.pi
+        pose[2] = wrap(pose[2])
         if max(abs(b[0]), abs(b[1])) < STOP_M and abs(b[2]) < STOP_RAD:
             break
     _linearise(pose, view_poses, view, g1, g2, r, jac)
