@@ -206,8 +206,47 @@ def test_coarse_inliers_are_the_numpy_definitions() -> None:
     assert 10 < got[0].sum() < 50   # the first pose explains most of its noisy rays
 
 
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(st.integers(0, 10**6))
+def test_tilted_errors_are_the_numpy_coplanarity_errors(seed: int) -> None:
+    from landmark_localizer.tilt_kernels import tilted_errors
+    from landmark_localizer.tilt_refinement import _Problem, tilted_residuals
+
+    rng = np.random.default_rng(seed)
+    view_poses, view, model, current = _planar_setup(rng, 30)
+    state = np.r_[rng.uniform(-2, 2, 2), rng.uniform(-np.pi, np.pi),
+                  rng.uniform(-0.05, 0.05, 2), rng.uniform(-0.2, 0.2)]
+    problem = _Problem(view_poses, view, model, current)
+    out = np.empty(30)
+    tilted_errors(state, BASE_TO_CAMERA_ROTATION, np.ascontiguousarray(problem.vx),
+                  np.ascontiguousarray(problem.vy), np.stack(problem.a1, axis=1), problem.g2,
+                  out)
+    np.testing.assert_allclose(out, tilted_residuals(state[None], view_poses, view, model,
+                                                     current)[0], atol=1e-12)
+
+
+def test_the_tilted_refinement_returns_the_forward_differences_at_its_state() -> None:
+    from landmark_localizer.tilt_kernels import STEP, refine_tilted_in_place, tilted_errors
+
+    rng = np.random.default_rng(9)
+    view_poses, view, model, current = _planar_setup(rng, 40)
+    vx, vy = view_poses[view, 0].copy(), view_poses[view, 1].copy()
+    a1, g2 = _unit(rng, 40), _unit(rng, 40)
+    state, r, jac = np.array([0.3, 0.1, 0.2, 0.0, 0.0, 0.0]), np.empty(40), np.empty((40, 6))
+    prior = np.array([0.0, 0.0, 0.0, 50.0, 50.0, 10.0])
+    assert refine_tilted_in_place(state, np.eye(3), vx, vy, a1, g2, 0.05, prior, 3, r, jac)
+    expected = np.empty(40)
+    tilted_errors(state, np.eye(3), vx, vy, a1, g2, expected)
+    np.testing.assert_array_equal(r, expected)
+    for k in (0, 3, 5):
+        probe = state.copy()
+        probe[k] += STEP[k]
+        tilted_errors(probe, np.eye(3), vx, vy, a1, g2, expected)
+        np.testing.assert_allclose(jac[:, k], (expected - r) / STEP[k], atol=1e-9)
+
+
 def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
-    from landmark_localizer import angular_kernels, planar_kernels, tracking
+    from landmark_localizer import angular_kernels, planar_kernels, tilt_kernels, tracking
     from landmark_localizer.compiled import warm_up
     from vbn_common import patch_alignment
     from vbn_common.geometry import lens
@@ -215,7 +254,8 @@ def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
     warm_up()
     kernels = [angular_kernels.gauss_newton, angular_kernels.normal_equations,
                angular_kernels.angular_errors, angular_kernels.coarse_inliers,
-               planar_kernels.refine_planar, tracking.disc_mask, tracking._nearest_keypoint,
+               planar_kernels.refine_planar, tilt_kernels.refine_tilted_in_place,
+               tracking.disc_mask, tracking._nearest_keypoint,
                lens._equidistant_newton, lens._brown_newton, lens._brown_project,
                patch_alignment._brightness_kernel,
                patch_alignment._correlation_kernel, patch_alignment._mosaic,

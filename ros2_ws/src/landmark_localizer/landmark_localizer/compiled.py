@@ -17,6 +17,7 @@ from landmark_localizer.angular_kernels import (
     normal_equations,
 )
 from landmark_localizer.planar_kernels import refine_planar
+from landmark_localizer.tilt_kernels import refine_tilted_in_place
 from landmark_localizer.tracking import _nearest_keypoint, disc_mask
 from vbn_common.geometry import lens
 from vbn_common.patch_alignment import _correlations, _match_brightness, tile_mosaic, warp_patches
@@ -35,6 +36,8 @@ def warm_up() -> None:
     coarse_inliers(np.zeros((1, 3)), rays, points, 0.1, 0.01, 0.01)
     refine_planar(np.zeros(3), np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.5]]),
                   np.array([0, 1, 1]), rays, rays, 0.01, 1, np.empty(3), np.empty((3, 3)))
+    refine_tilted_in_place(np.zeros(6), np.eye(3), np.zeros(3), np.ones(3), rays, rays, 0.01,
+                           np.ones(6), 1, np.empty(3), np.empty((3, 6)))
     disc_mask(5, 5, 2.0, 2.0, 1.5)
     _nearest_keypoint(np.zeros((1, 2), np.float32), np.zeros(2, np.float32),
                       np.zeros((1, 128), np.float32), np.zeros((1, 128), np.float32),

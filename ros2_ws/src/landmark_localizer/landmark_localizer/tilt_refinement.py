@@ -22,8 +22,9 @@ solvers' (:func:`vbn_common.geometry.epipolar.planar_sampson`).
 Priors keep the three extra unknowns where the data cannot place them (a robot on the
 line through two views, few points): ``pitch, roll ~ N(0, tilt_prior_deg)`` and ``dz ~
 N(0, height_prior_m)``, as residual rows scaled to the measurement noise.
-Gauss-Newton with Huber weights, the Jacobian by forward differences in one vectorised
-pass; the covariance of ``(x, y, yaw)`` is the marginal of the full one.
+Gauss-Newton with Huber weights, the Jacobian by forward differences, compiled
+(:mod:`~landmark_localizer.tilt_kernels`); the covariance of ``(x, y, yaw)`` is the
+marginal of the full one.
 """
 from __future__ import annotations
 
@@ -31,12 +32,12 @@ import math
 
 import numpy as np
 
-from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION, wrap_angle
+from landmark_localizer.tilt_kernels import refine_tilted_in_place
+from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
 
 __all__ = ['marginal_covariance', 'refine_tilted', 'tilted_residuals']
 
 _M = BASE_TO_CAMERA_ROTATION  # planar (z up) <- optical
-_STEP = np.array([1e-4, 1e-4, 1e-5, 1e-5, 1e-5, 1e-4])
 
 
 def _levelling(pitch: np.ndarray, roll: np.ndarray) -> np.ndarray:
@@ -134,25 +135,16 @@ def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
         step cannot be solved.
     """
     state = np.r_[np.asarray(initial, float)[:3], 0.0, 0.0, 0.0]
-    prior = _prior(noise, tilt_prior_deg, height_prior_m)
     problem = _Problem(view_poses, view, rays_model, rays_current)
-    steps = np.diag(_STEP)
-    for _ in range(iterations):
-        both = problem.residuals(np.vstack([state, state + steps]))
-        r, jac = both[0], ((both[1:] - both[0]) / _STEP[:, None]).T
-        weights = np.minimum(1.0, threshold / np.maximum(np.abs(r), 1e-12))
-        jw = jac * weights[:, None]
-        normal = jw.T @ jac + np.diag(prior ** 2) + 1e-12 * np.eye(6)
-        try:
-            delta = np.linalg.solve(normal, -(jw.T @ r + prior ** 2 * state))
-        except np.linalg.LinAlgError:
-            return None
-        state = state + delta
-        state[2] = float(wrap_angle(state[2]))
-        if np.abs(delta[[0, 1, 5]]).max() < 1e-4 and np.abs(delta[2:5]).max() < 1e-5:
-            break
-    both = problem.residuals(np.vstack([state, state + steps]))
-    return state, both[0], ((both[1:] - both[0]) / _STEP[:, None]).T
+    a1 = np.ascontiguousarray(np.stack(problem.a1, axis=1))
+    r, jac = np.empty(len(a1)), np.empty((len(a1), 6))
+    vx, vy = np.ascontiguousarray(problem.vx), np.ascontiguousarray(problem.vy)
+    if not refine_tilted_in_place(state, _M, vx, vy, a1, problem.g2,
+                                  float(threshold), _prior(noise, tilt_prior_deg,
+                                                           height_prior_m),
+                                  int(iterations), r, jac):
+        return None
+    return state, r, jac
 
 
 def marginal_covariance(jac: np.ndarray, sigma2: float, noise: float,
