@@ -314,6 +314,7 @@ class PinholeCamera(CameraModel):
         object.__setattr__(self, 'd', d)
         object.__setattr__(self, '_limit', lens.brown_limit(np.asarray(d)) if any(d) else
                            math.inf)
+        object.__setattr__(self, '_coefficients', np.array(lens.brown_coefficients(d)))
 
     @property
     def distorted(self) -> bool:
@@ -370,7 +371,9 @@ class PinholeCamera(CameraModel):
         """Return unit optical-frame rays of pixels, undistorted (:mod:`.lens`)."""
         if not self.distorted:
             return super().unproject(uv)
-        xy = lens.brown_undistort(uv, self.k_matrix, np.asarray(self.d))
+        xy = lens.brown_invert(np.ascontiguousarray(np.asarray(uv, float).reshape(-1, 2)),
+                               self.fx, self.fy, self.cx, self.cy,
+                               self._coefficients)  # type: ignore[attr-defined]
         rays = np.column_stack([xy, np.ones(len(xy))])
         return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 

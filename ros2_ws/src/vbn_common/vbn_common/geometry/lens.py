@@ -25,9 +25,10 @@ they do, and a point beyond it is outside the camera's model (``project`` marks 
 invalid; a pixel that would need it does not exist in a real image).
 
 The inverses, on the hot path of the builder and the localizer (each keypoint becomes a
-ray; images are never undistorted): :func:`brown_undistort` runs OpenCV's
-``undistortPoints`` with a convergence criterion (50 iterations, 1e-12) and finishes
-with Newton steps; :func:`equidistant_theta` is a vectorised
+ray; images are never undistorted): :func:`brown_undistort` is a compiled Newton
+iteration on the forward mapping, each step halved until it helps (it replaced OpenCV's
+``undistortPoints``, whose fixed-point iteration stalled under strong distortion and whose
+call cost more than the points); :func:`equidistant_theta` is a vectorised
 Newton iteration on ``theta_d(theta)`` (OpenCV's ``fisheye.undistortPoints`` returns
 ``X / Z``, which does not exist at 90 degrees).
 """
@@ -35,21 +36,17 @@ from __future__ import annotations
 
 import math
 
-import cv2
 from numba import njit
 import numpy as np
 
-__all__ = ['BROWN_MODELS', 'MODELS', 'brown_distort', 'brown_limit', 'brown_project',
-           'brown_undistort', 'coefficient_count', 'equidistant_limit', 'equidistant_theta',
-           'equidistant_theta_d']
+__all__ = ['BROWN_MODELS', 'MODELS', 'brown_coefficients', 'brown_distort', 'brown_invert',
+           'brown_limit', 'brown_project', 'brown_undistort', 'coefficient_count',
+           'equidistant_limit', 'equidistant_theta', 'equidistant_theta_d']
 
 #: Distortion models on normalised coordinates, with their coefficient counts.
 BROWN_MODELS = {'plumb_bob': 5, 'rational_polynomial': 8}
 #: Every model this module handles, with its coefficient count.
 MODELS = {**BROWN_MODELS, 'equidistant': 4}
-
-_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-12)
-
 
 def coefficient_count(model: str) -> int:
     """Return the number of ``d`` coefficients of a model (KeyError if unknown)."""
@@ -62,13 +59,14 @@ def _padded(d: np.ndarray, n: int) -> tuple[float, ...]:
     return tuple(values + [0.0] * (n - len(values)))
 
 
-def _brown_coefficients(d: np.ndarray) -> tuple[float, ...]:
+def brown_coefficients(d: np.ndarray) -> tuple[float, ...]:
+    """Return the eight rational_polynomial coefficients of ``d`` (plumb_bob: zeros after)."""
     return _padded(d, 8)
 
 
 def brown_distort(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return the distorted normalised coordinates ``(xd, yd)`` (module docstring)."""
-    k1, k2, p1, p2, k3, k4, k5, k6 = _brown_coefficients(np.asarray(d, float).reshape(-1))
+    k1, k2, p1, p2, k3, k4, k5, k6 = brown_coefficients(np.asarray(d, float).reshape(-1))
     r2 = x * x + y * y
     radial = (1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))) / (1.0 + r2 * (k4 + r2 * (k5 + r2 * k6)))
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
@@ -84,7 +82,7 @@ def brown_project(points: np.ndarray, fx: float, fy: float, cx: float, cy: float
     (:func:`brown_limit`); the image's bounds are the camera's to check. The same
     arithmetic as :func:`brown_distort` on ``(X / Z, Y / Z)``, point by point, compiled.
     """
-    return _brown_project(points, fx, fy, cx, cy, np.array(_brown_coefficients(d)), limit)
+    return _brown_project(points, fx, fy, cx, cy, np.array(brown_coefficients(d)), limit)
 
 
 @njit(cache=True, error_model='numpy')
@@ -106,7 +104,7 @@ def brown_limit(d: np.ndarray, r_max: float = 10.0) -> float:
     Sampled finely on ``[0, r_max]`` (``r_max`` = 10 is 84 degrees off axis); ``r_max``
     when it grows throughout. The tangential terms are small and are not considered.
     """
-    k1, k2, _, _, k3, k4, k5, k6 = _brown_coefficients(np.asarray(d, float).reshape(-1))
+    k1, k2, _, _, k3, k4, k5, k6 = brown_coefficients(np.asarray(d, float).reshape(-1))
     r = np.linspace(0.0, r_max, 20001)
     r2 = r * r
     denominator = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
@@ -124,18 +122,10 @@ def brown_undistort(uv: np.ndarray, k: np.ndarray, d: np.ndarray) -> np.ndarray:
         k: ``(3, 3)`` intrinsic matrix.
         d: plumb_bob or rational_polynomial coefficients.
     """
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 1, 2)
-    if uv.shape[0] == 0:
-        return np.zeros((0, 2))
+    uv = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
     k = np.asarray(k, np.float64)
-    d = np.asarray(d, np.float64).reshape(-1)
-    xy = cv2.undistortPoints(uv, k, d, criteria=_UNDISTORT_CRITERIA).reshape(-1, 2)
-    # OpenCV's fixed-point iteration can stall under strong distortion: Newton steps on
-    # the forward mapping (a central-difference Jacobian) finish it, compiled.
-    target = np.column_stack([(uv[:, 0, 0] - k[0, 2]) / k[0, 0],
-                              (uv[:, 0, 1] - k[1, 2]) / k[1, 1]])
-    return _brown_newton(np.ascontiguousarray(xy, float), target,
-                         np.array(_brown_coefficients(d)))
+    return brown_invert(uv, float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2]),
+                        np.array(brown_coefficients(np.asarray(d, np.float64).reshape(-1))))
 
 
 @njit(cache=True, error_model='numpy')
@@ -148,30 +138,54 @@ def _brown_point(x: float, y: float, c: np.ndarray) -> tuple[float, float]:
             y * radial + c[2] * (r2 + 2.0 * y * y) + 2.0 * c[3] * x * y)
 
 
-@njit(cache=True)
-def _brown_newton(xy: np.ndarray, target: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """Newton steps on each point until it distorts within 1e-14 of its target (at most 5)."""
+@njit(cache=True, error_model='numpy')
+def brown_invert(uv: np.ndarray, fx: float, fy: float, cx: float, cy: float,
+                 c: np.ndarray) -> np.ndarray:
+    """Undistorted normalised ``(x, y)`` ``(n, 2)`` of pixels ``uv (n, 2)``, compiled.
+
+    Newton's method on the forward mapping (:func:`brown_distort`, coefficients ``c``
+    (8,)) from the distorted coordinates, a central-difference Jacobian, each step
+    halved until it lowers the residual (strong distortion overshoots a full step); it
+    stops once the point distorts within 1e-16 of its target, after 30 steps, or when
+    no step helps. The same root as OpenCV's ``undistortPoints`` followed by Newton
+    steps, without its per-call cost.
+    """
+    n = uv.shape[0]
+    xy = np.empty((n, 2))
     h = 1e-7
-    for i in range(xy.shape[0]):
-        x, y = xy[i, 0], xy[i, 1]
-        for _ in range(5):
-            fx, fy = _brown_point(x, y, c)
-            rx, ry = fx - target[i, 0], fy - target[i, 1]
-            if abs(rx) + abs(ry) < 1e-14:
+    for i in range(n):
+        tx, ty = (uv[i, 0] - cx) / fx, (uv[i, 1] - cy) / fy
+        x, y = tx, ty
+        fx0, fy0 = _brown_point(x, y, c)
+        rx, ry = fx0 - tx, fy0 - ty
+        residual = abs(rx) + abs(ry)
+        for _ in range(30):
+            if not residual >= 1e-16:   # converged (or not finite: nothing to do)
                 break
             ax, ay = _brown_point(x + h, y, c)
             bx, by = _brown_point(x - h, y, c)
-            cx, cy = _brown_point(x, y + h, c)
-            ex, ey = _brown_point(x, y - h, c)
+            px, py = _brown_point(x, y + h, c)
+            qx, qy = _brown_point(x, y - h, c)
             j11, j21 = (ax - bx) / (2 * h), (ay - by) / (2 * h)
-            j12, j22 = (cx - ex) / (2 * h), (cy - ey) / (2 * h)
+            j12, j22 = (px - qx) / (2 * h), (py - qy) / (2 * h)
             det = j11 * j22 - j12 * j21
             if not abs(det) > 1e-12:
                 break
             sx, sy = (j22 * rx - j12 * ry) / det, (j11 * ry - j21 * rx) / det
-            if not (math.isfinite(sx) and math.isfinite(sy)):
+            t, moved = 1.0, False
+            while t > 1e-4:
+                nx, ny = x - t * sx, y - t * sy
+                gx, gy = _brown_point(nx, ny, c)
+                nrx, nry = gx - tx, gy - ty
+                if abs(nrx) + abs(nry) < residual:
+                    x, y, rx, ry, residual = nx, ny, nrx, nry, abs(nrx) + abs(nry)
+                    moved = True
+                    break
+                t *= 0.5
+            if not moved:
                 break
-            x, y = x - sx, y - sy
+        if not math.isfinite(residual):   # a pixel that is not finite has no ray
+            x = y = math.nan
         xy[i, 0], xy[i, 1] = x, y
     return xy
 
