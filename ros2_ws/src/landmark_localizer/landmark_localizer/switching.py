@@ -107,6 +107,10 @@ class MotionPredictor:
         return np.asarray(pose, float) + v * horizon_s
 
 
+#: Where along twice the predicted motion the candidate regions are scored.
+_PATH_STEPS = np.linspace(0.0, 2.0, 9)[1:]
+
+
 def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
                   predicted: np.ndarray, margin: float, tracked: Any
                   ) -> int | None:
@@ -125,12 +129,16 @@ def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
     # A position alone (enough without heading sectors) is a pose at heading 0.
     current = np.r_[np.asarray(current, float)[:3], 0.0][:3]
     predicted = np.r_[np.asarray(predicted, float)[:3], 0.0][:3]
-    near = index.poses_near(predicted, margin * index.spacing)
-    predicted_pose, _ = index.nearest_pose(predicted)
-    near = np.union1d(np.asarray(near, np.int64), [predicted_pose])
-    if index.region_contains(region, near).all():
+    delta = predicted - current
+    delta[2] = (delta[2] + np.pi) % (2 * np.pi) - np.pi
+    path = current + _PATH_STEPS[:, None] * delta
+    # One query of the tree for the predicted pose, the current one and the path.
+    points = index.pose_points(np.vstack([predicted, current, path]))
+    _, nearest = index.tree.query(points)
+    predicted_pose, current_pose, path_poses = int(nearest[0]), int(nearest[1]), nearest[2:]
+    near = index.tree.query_ball_point(points[0], r=margin * index.spacing)
+    if index.region_contains(region, np.r_[np.asarray(near, np.int64), predicted_pose]).all():
         return None
-    current_pose, _ = index.nearest_pose(current)
     ahead = index.regions_of_pose(predicted_pose)
     both = np.intersect1d(index.regions_of_pose(current_pose), ahead)
     both = both[both != region]
@@ -138,11 +146,6 @@ def choose_region(index: DatabaseIndex, region: int, current: np.ndarray,
         both = ahead[ahead != region]   # a turn into the next sector (module docstring)
     if both.size == 0:
         return None
-    steps = np.linspace(0.0, 2.0, 9)[1:]
-    delta = predicted - current
-    delta[2] = (delta[2] + np.pi) % (2 * np.pi) - np.pi
-    path = current + steps[:, None] * delta
-    _, path_poses = index.tree.query(index.pose_points(path))
     scores = [(int(index.region_contains(r, path_poses).sum()), tracked.get(int(r), 0),
                -int(r)) for r in both]
     best = int(np.argmax([s[0] * 1000 + s[1] for s in scores]))
