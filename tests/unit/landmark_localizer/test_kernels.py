@@ -245,8 +245,29 @@ def test_the_tilted_refinement_returns_the_forward_differences_at_its_state() ->
         np.testing.assert_allclose(jac[:, k], (expected - r) / STEP[k], atol=1e-9)
 
 
+@settings(max_examples=25, deadline=None, derandomize=True)
+@given(st.integers(0, 10**6))
+def test_optical_points_turn_shift_and_tilt_as_the_matrices_do(seed: int) -> None:
+    from landmark_localizer.index import _optical_points, tilt_rotation
+
+    _, points, _, state = _ray_problem(seed, 12)
+    points[3] = [np.nan, 1.0, 1.0]
+    c, s = math.cos(state[2]), math.sin(state[2])
+    turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])   # base -> world
+    base = (points - [state[0], state[1], state[5]]) @ turn          # R_z^T (p - t)
+    expected = base @ tilt_rotation(state[3], state[4]) @ BASE_TO_CAMERA_ROTATION
+    optical, finite = _optical_points(state, points, BASE_TO_CAMERA_ROTATION)
+    assert finite.tolist() == [i != 3 for i in range(12)]
+    np.testing.assert_allclose(optical[finite], expected[finite], atol=1e-12)
+    # A level state leaves the height alone.
+    level = np.r_[state[:3], 0.0, 0.0, 0.0]
+    flat, _ = _optical_points(level, points, np.eye(3))
+    np.testing.assert_allclose(flat[finite], ((points - [state[0], state[1], 0.0]) @ turn)[
+        finite], atol=1e-12)
+
+
 def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
-    from landmark_localizer import angular_kernels, planar_kernels, tilt_kernels, tracking
+    from landmark_localizer import angular_kernels, index, planar_kernels, tilt_kernels, tracking
     from landmark_localizer.compiled import warm_up
     from vbn_common import patch_alignment
     from vbn_common.geometry import lens
@@ -255,6 +276,7 @@ def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
     kernels = [angular_kernels.gauss_newton, angular_kernels.normal_equations,
                angular_kernels.angular_errors, angular_kernels.coarse_inliers,
                planar_kernels.refine_planar, tilt_kernels.refine_tilted_in_place,
+               index._optical_points,
                tracking.disc_mask, tracking._nearest_keypoint,
                lens._equidistant_newton, lens.brown_invert, lens._brown_project,
                patch_alignment._brightness_kernel,

@@ -16,6 +16,7 @@ from landmark_localizer.angular_kernels import (
     gauss_newton,
     normal_equations,
 )
+from landmark_localizer.index import _optical_points
 from landmark_localizer.planar_kernels import refine_planar
 from landmark_localizer.tilt_kernels import refine_tilted_in_place
 from landmark_localizer.tracking import _nearest_keypoint, disc_mask
@@ -38,6 +39,7 @@ def warm_up() -> None:
                   np.array([0, 1, 1]), rays, rays, 0.01, 1, np.empty(3), np.empty((3, 3)))
     refine_tilted_in_place(np.zeros(6), np.eye(3), np.zeros(3), np.ones(3), rays, rays, 0.01,
                            np.ones(6), 1, np.empty(3), np.empty((3, 6)))
+    _optical_points(np.zeros(6), np.ones((2, 3)), np.eye(3))
     disc_mask(5, 5, 2.0, 2.0, 1.5)
     _nearest_keypoint(np.zeros((1, 2), np.float32), np.zeros(2, np.float32),
                       np.zeros((1, 128), np.float32), np.zeros((1, 128), np.float32),

@@ -26,6 +26,7 @@ import math
 from typing import Any
 
 import cv2
+from numba import njit
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
@@ -391,23 +392,49 @@ class DatabaseIndex:
         and False for a point that is not finite or falls outside the image of
         :attr:`frame_camera`.
         """
-        pts = np.asarray(points, float).reshape(-1, 3)
-        ok = np.all(np.isfinite(pts), axis=1)
-        x, y, yaw = (float(v) for v in camera_pose[:3])
-        dx, dy = pts[:, 0] - x, pts[:, 1] - y
-        c, s = math.cos(yaw), math.sin(yaw)
-        base = np.stack([c * dx + s * dy, -s * dx + c * dy, pts[:, 2]], axis=1)
-        if len(camera_pose) >= 6 and np.any(np.asarray(camera_pose[3:6], float) != 0.0):
-            pitch, roll, dz = (float(v) for v in camera_pose[3:6])
-            base[:, 2] -= dz
-            base = base @ tilt_rotation(pitch, roll)   # the tilted frame's rays: R^T v
-        optical = base @ BASE_TO_CAMERA_ROTATION  # p_optical = M^T p_base
+        pts = np.ascontiguousarray(np.asarray(points, float).reshape(-1, 3))
+        state = np.zeros(6)
+        state[:min(len(camera_pose), 6)] = np.asarray(camera_pose, float)[:6]
+        optical, ok = _optical_points(state, pts, BASE_TO_CAMERA_ROTATION)
         uv = np.full((len(pts), 2), np.nan)
         if ok.any():
             proj, valid = self.frame_camera.project(optical[ok])
             uv[ok] = proj
             ok[ok] = valid
         return uv, ok
+
+
+@njit(cache=True)
+def _optical_points(state: np.ndarray, pts: np.ndarray, m: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """``(n, 3)`` points seen from ``state`` ``(x, y, yaw, pitch, roll, dz)``, optical frame.
+
+    The base-frame vector ``v`` of each point (turned by the yaw, ``dz`` below its
+    height), through the frame's tilt (``R^T v``, :func:`tilt_rotation`) and into the
+    optical frame (``M^T``, ``m`` the base-from-optical rotation), and whether the
+    point is finite. Compiled: a dozen numpy calls for a few dozen points.
+    """
+    c, s = math.cos(state[2]), math.sin(state[2])
+    cp, sp = math.cos(state[3]), math.sin(state[3])
+    cr, sr = math.cos(state[4]), math.sin(state[4])
+    tilted = state[3] != 0.0 or state[4] != 0.0 or state[5] != 0.0
+    # tilt_rotation(pitch, roll) = R_y(pitch) R_x(roll); a row vector v becomes v R.
+    r = np.array([[cp, sp * sr, sp * cr], [0.0, cr, -sr], [-sp, cp * sr, cp * cr]])
+    n = pts.shape[0]
+    out, finite = np.empty((n, 3)), np.empty(n, np.bool_)
+    for i in range(n):
+        finite[i] = (math.isfinite(pts[i, 0]) and math.isfinite(pts[i, 1])
+                     and math.isfinite(pts[i, 2]))
+        dx, dy = pts[i, 0] - state[0], pts[i, 1] - state[1]
+        v0, v1, v2 = c * dx + s * dy, -s * dx + c * dy, pts[i, 2]
+        if tilted:
+            v2 -= state[5]
+            v0, v1, v2 = (v0 * r[0, 0] + v1 * r[1, 0] + v2 * r[2, 0],
+                          v0 * r[0, 1] + v1 * r[1, 1] + v2 * r[2, 1],
+                          v0 * r[0, 2] + v1 * r[1, 2] + v2 * r[2, 2])
+        for j in range(3):
+            out[i, j] = v0 * m[0, j] + v1 * m[1, j] + v2 * m[2, j]
+    return out, finite
 
 
 def tilt_rotation(pitch: float, roll: float) -> np.ndarray:
