@@ -161,6 +161,23 @@ def normal_equations(state: np.ndarray, rays: np.ndarray, points: np.ndarray,
 
 
 @njit(cache=True)
+def huber_accumulate(r: np.ndarray, jac: np.ndarray, threshold: float, a: np.ndarray,
+                     b: np.ndarray) -> None:
+    """Add the Huber-weighted ``J^T W J`` to ``a`` and ``-J^T W r`` to ``b``, ray by ray.
+
+    ``r (n,)`` residuals, ``jac (n, m)`` their Jacobian, ``threshold`` the Huber
+    threshold (a residual beyond it weighs ``threshold / |r|``).
+    """
+    m = jac.shape[1]
+    for i in range(r.size):
+        w = min(1.0, threshold / max(abs(r[i]), 1e-12))
+        for j in range(m):
+            b[j] -= w * jac[i, j] * r[i]
+            for k in range(m):
+                a[j, k] += w * jac[i, j] * jac[i, k]
+
+
+@njit(cache=True)
 def solve_in_place(a: np.ndarray, b: np.ndarray, tiny: float) -> bool:
     """Solve ``a x = b`` in place (``b`` becomes ``x``): LU with partial pivoting.
 

@@ -16,7 +16,7 @@ import math
 from numba import njit
 import numpy as np
 
-from landmark_localizer.angular_kernels import solve_in_place, wrap
+from landmark_localizer.angular_kernels import huber_accumulate, solve_in_place, wrap
 
 __all__ = ['planar_residuals', 'refine_planar']
 
@@ -87,12 +87,7 @@ def refine_planar(pose: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
         _linearise(pose, view_poses, view, g1, g2, r, jac)
         a[:, :] = 0.0
         b[:] = 0.0
-        for i in range(r.size):
-            w = min(1.0, threshold / max(abs(r[i]), 1e-12))
-            for j in range(3):
-                b[j] -= w * jac[i, j] * r[i]
-                for k in range(3):
-                    a[j, k] += w * jac[i, j] * jac[i, k]
+        huber_accumulate(r, jac, threshold, a, b)
         for j in range(3):
             a[j, j] += 1e-12
         if not solve_in_place(a, b, 0.0):

@@ -16,7 +16,7 @@ import math
 from numba import njit
 import numpy as np
 
-from landmark_localizer.angular_kernels import solve_in_place, wrap
+from landmark_localizer.angular_kernels import huber_accumulate, solve_in_place, wrap
 
 __all__ = ['refine_tilted_in_place', 'tilted_errors']
 
@@ -107,12 +107,7 @@ def refine_tilted_in_place(state: np.ndarray, m: np.ndarray, vx: np.ndarray, vy:
         a[:, :] = 0.0
         for j in range(6):
             b[j] = -prior[j] * prior[j] * state[j]
-        for i in range(r.size):
-            w = min(1.0, threshold / max(abs(r[i]), 1e-12))
-            for j in range(6):
-                b[j] -= w * jac[i, j] * r[i]
-                for k in range(6):
-                    a[j, k] += w * jac[i, j] * jac[i, k]
+        huber_accumulate(r, jac, threshold, a, b)
         for j in range(6):
             a[j, j] += prior[j] * prior[j] + 1e-12
         if not solve_in_place(a, b, 0.0):
