@@ -45,8 +45,8 @@ def test_plumb_bob_hand_checked() -> None:
 def test_brown_inversion_finds_the_undistorted_point_up_to_the_limit(d) -> None:
     """Back to machine precision, also near the radius where the mapping stops growing.
 
-    Under k1 = -0.5 OpenCV's ``undistortPoints`` stalls 4e-5 short of the point near the
-    limit (50 fixed-point steps); the halved Newton steps do not.
+    Under k1 = -0.5 the former inversion (OpenCV's ``undistortPoints``, then five Newton
+    steps) ended 4e-5 short of points near the limit; the halved Newton steps do not.
     """
     d = np.asarray(d)
     rng = np.random.default_rng(4)
