@@ -386,7 +386,8 @@ class PinholeCamera(CameraModel):
         points = np.asarray(points, dtype=float).reshape(-1, 3)
         if self.distorted:   # compiled: a dozen numpy calls for a few dozen points
             uv, valid = lens.brown_project(np.ascontiguousarray(points), self.fx, self.fy,
-                                           self.cx, self.cy, np.asarray(self.d, float),
+                                           self.cx, self.cy,
+                                           self._coefficients,  # type: ignore[attr-defined]
                                            self._limit)  # type: ignore[attr-defined]
             return uv, valid & self._inside(uv)
         z = points[:, 2]

@@ -48,6 +48,7 @@ BROWN_MODELS = {'plumb_bob': 5, 'rational_polynomial': 8}
 #: Every model this module handles, with its coefficient count.
 MODELS = {**BROWN_MODELS, 'equidistant': 4}
 
+
 def coefficient_count(model: str) -> int:
     """Return the number of ``d`` coefficients of a model (KeyError if unknown)."""
     return MODELS[model]
