@@ -5,7 +5,9 @@ The executor thread files each image with :meth:`FrameWorker.put` (a one-slot
 taken), the worker thread takes the newest and runs ``process`` on it; what ``process``
 raises goes to ``on_error``, never ends the thread. :meth:`FrameWorker.close` wakes the
 thread for good and waits for the frame in progress, so that nothing is processed or
-published after a lifecycle deactivation. Pure Python, no rclpy.
+published after a lifecycle deactivation. Between frames, at most every 2 s, it
+hands the heap's free pages back to the system (:mod:`~landmark_localizer.heap`), so
+that a relocalization's temporaries do not stay resident. Pure Python, no rclpy.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from collections.abc import Callable
 import threading
 from typing import Any
 
+from landmark_localizer.heap import HeapTrimmer
 from landmark_localizer.node_support import Mailbox
 
 __all__ = ['WORKER_JOIN_S', 'FrameWorker']
@@ -28,11 +31,14 @@ class FrameWorker:
         process: Called with each item taken.
         on_error: Called with what ``process`` raised.
         name: The thread's name.
+        trimmer: Called after each item (default: a :class:`.HeapTrimmer`, every 2 s).
     """
 
     def __init__(self, process: Callable[[Any], None],
-                 on_error: Callable[[Exception], None], name: str = 'localizer-frames') -> None:
+                 on_error: Callable[[Exception], None], name: str = 'localizer-frames',
+                 trimmer: HeapTrimmer | None = None) -> None:
         self._process, self._on_error = process, on_error
+        self.trimmer = HeapTrimmer() if trimmer is None else trimmer
         self._mailbox = Mailbox()
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
@@ -62,3 +68,4 @@ class FrameWorker:
                 self._process(item)
             except Exception as error:  # noqa: BLE001 - a node reports, it does not die
                 self._on_error(error)
+            self.trimmer.after_frame()
