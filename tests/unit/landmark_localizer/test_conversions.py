@@ -197,8 +197,9 @@ def test_mailbox_keeps_only_the_newest_item_and_closes() -> None:
     worker.join(timeout=5)
     assert taken == [(True, 'c')]
     box.put('d')
+    assert not box.closed
     box.close()
-    assert box.take() == (False, None)  # closed: the worker stops, even with an item
+    assert box.take() == (False, None) and box.closed  # the worker stops, even with an item
 
 
 def test_the_node_runs_opencv_and_openblas_on_one_thread() -> None:

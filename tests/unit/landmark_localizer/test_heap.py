@@ -60,21 +60,43 @@ def test_the_trimmer_trims_at_most_once_a_period() -> None:
     assert trimmer.trims == 3          # at 101.0, 102.0 and 105.0
 
 
+def test_the_trimmer_trims_once_when_frames_stop() -> None:
+    now = [0.0]
+    trimmer = HeapTrimmer(period=2.0, clock=lambda: now[0])
+    trimmer.when_idle()
+    assert trimmer.trims == 0          # nothing came since it started
+    now[0] = 0.5
+    trimmer.after_frame()              # too soon for a trim
+    now[0] = 2.5
+    trimmer.when_idle()
+    trimmer.when_idle()
+    assert trimmer.trims == 1          # one trim for the frame, not one per idle period
+    now[0] = 3.0
+    trimmer.after_frame()              # 0.5 s after the idle trim: none
+    assert trimmer.trims == 1
+
+
 class _Counting:
     """Counts the worker's calls; ``wait_for(n)`` waits until there were ``n``."""
 
-    def __init__(self) -> None:
-        self.calls = 0
+    def __init__(self, period: float = 60.0) -> None:
+        self.period, self.frames, self.idle = period, 0, 0
         self._changed = threading.Condition()
 
     def after_frame(self) -> None:
         with self._changed:
-            self.calls += 1
+            self.frames += 1
             self._changed.notify_all()
 
-    def wait_for(self, n: int) -> bool:
+    def when_idle(self) -> None:
         with self._changed:
-            return self._changed.wait_for(lambda: self.calls >= n, timeout=30)
+            self.idle += 1
+            self._changed.notify_all()
+
+    def wait_for(self, frames: int, idle: int = 0) -> bool:
+        with self._changed:
+            return self._changed.wait_for(
+                lambda: self.frames >= frames and self.idle >= idle, timeout=30)
 
 
 def test_the_frame_worker_trims_after_each_frame_even_a_failed_one() -> None:
@@ -91,4 +113,14 @@ def test_the_frame_worker_trims_after_each_frame_even_a_failed_one() -> None:
     worker.put('good')
     assert trimmer.wait_for(2)
     worker.close()
-    assert trimmer.calls == 2 and processed == ['good'] and [str(e) for e in errors] == ['bad']
+    assert trimmer.frames == 2 and processed == ['good'] and [str(e) for e in errors] == ['bad']
+    assert trimmer.idle == 0 and not worker.alive
+
+
+def test_the_frame_worker_calls_the_idle_trim_when_no_frame_comes() -> None:
+    trimmer = _Counting(period=0.01)
+    worker = FrameWorker(lambda item: None, lambda error: None, trimmer=trimmer)
+    worker.put('frame')
+    assert trimmer.wait_for(1, idle=2)   # a frame, then a period without one, twice
+    worker.close()
+    assert not worker.alive

@@ -5,9 +5,10 @@ The executor thread files each image with :meth:`FrameWorker.put` (a one-slot
 taken), the worker thread takes the newest and runs ``process`` on it; what ``process``
 raises goes to ``on_error``, never ends the thread. :meth:`FrameWorker.close` wakes the
 thread for good and waits for the frame in progress, so that nothing is processed or
-published after a lifecycle deactivation. Between frames, at most every 2 s, it
-hands the heap's free pages back to the system (:mod:`~landmark_localizer.heap`), so
-that a relocalization's temporaries do not stay resident. Pure Python, no rclpy.
+published after a lifecycle deactivation. Between frames, at most every 2 s, and once
+when frames stop, it hands the heap's free pages back to the system
+(:mod:`~landmark_localizer.heap`), so that a relocalization's temporaries do not stay
+resident. Pure Python, no rclpy.
 """
 from __future__ import annotations
 
@@ -61,9 +62,12 @@ class FrameWorker:
 
     def _run(self) -> None:
         while True:
-            ok, item = self._mailbox.take()
+            ok, item = self._mailbox.take(timeout=self.trimmer.period)
             if not ok:
-                return
+                if self._mailbox.closed:
+                    return
+                self.trimmer.when_idle()   # no frame for a period
+                continue
             try:
                 self._process(item)
             except Exception as error:  # noqa: BLE001 - a node reports, it does not die

@@ -9,9 +9,10 @@ memory of a node that relocalizes now and then steps up by whatever happened to 
 pinned (a CI run of the 10,000-frame memory test saw 311 -> 346 MiB at its second
 kidnapping). ``malloc_trim`` hands every whole free page back, wherever it lies;
 :class:`HeapTrimmer` calls it from the frame worker at most once per period, between
-frames. A trim takes about 0.1 ms, and the frame after it faults in again the pages it
-reuses: trimming every 10th frame of ``bags/room_run`` added 0.07 ms to the mean
-tracked frame (8.44 -> 8.51 ms), so the period is 2 s, every 20th frame at 10 Hz.
+frames, and once when no frame came for a period. A trim takes about 0.1 ms, and the
+frame after it faults in again the pages it reuses: trimming every 10th frame of
+``bags/room_run`` added 0.07 ms to the mean tracked frame (8.44 -> 8.51 ms), so the
+period is 2 s, every 20th frame at 10 Hz.
 Elsewhere than glibc it does nothing. The builder's SIFT workers do the opposite
 (:mod:`vbn_common.allocator`): their life is one extraction, so they keep what they free.
 """
@@ -48,7 +49,7 @@ def trim_heap() -> bool:
 
 
 class HeapTrimmer:
-    """Trims the heap when :meth:`after_frame` is called ``period`` seconds after the last.
+    """Trims the heap between frames at most once a period, and once when frames stop.
 
     Args:
         period: The least time between trims in seconds.
@@ -58,12 +59,24 @@ class HeapTrimmer:
     def __init__(self, period: float = TRIM_PERIOD_S, clock: Any = time.monotonic) -> None:
         self.period, self._clock = period, clock
         self._last = clock()
+        self._pending = False   # frames since the last trim
         self.trims = 0
 
     def after_frame(self) -> None:
         """Trim if the period has passed since the last trim (or since construction)."""
-        now = self._clock()
-        if now - self._last >= self.period:
-            self._last = now
-            trim_heap()
-            self.trims += 1
+        self._pending = True
+        if self._clock() - self._last >= self.period:
+            self._trim()
+
+    def when_idle(self) -> None:
+        """Trim if a frame came since the last trim (called when none came for a period).
+
+        A paused bag or a deactivated node then keeps nothing of its last frames resident.
+        """
+        if self._pending:
+            self._trim()
+
+    def _trim(self) -> None:
+        self._last, self._pending = self._clock(), False
+        trim_heap()
+        self.trims += 1

@@ -140,6 +140,11 @@ class Mailbox:
             self._closed = True
             self._ready.notify_all()
 
+    @property
+    def closed(self) -> bool:
+        """Whether :meth:`close` was called."""
+        return self._closed
+
 
 def limit_malloc_arenas(arenas: int = _ARENAS) -> bool:
     """Share at most ``arenas`` glibc malloc arenas between all threads; say if it took.
