@@ -32,7 +32,8 @@ class FrameWorker:
         process: Called with each item taken.
         on_error: Called with what ``process`` raised.
         name: The thread's name.
-        trimmer: Called after each item (default: a :class:`.HeapTrimmer`, every 2 s).
+        trimmer: Its ``after_frame`` is called after each item and its ``when_idle`` when
+            none came for its ``period`` (default: a :class:`.HeapTrimmer`, 2 s).
     """
 
     def __init__(self, process: Callable[[Any], None],

@@ -12,9 +12,9 @@ kidnapping). ``malloc_trim`` hands every whole free page back, wherever it lies;
 frames, and once when no frame came for a period. A trim takes about 0.1 ms, and the
 frame after it faults in again the pages it reuses: trimming every 10th frame of
 ``bags/room_run`` added 0.07 ms to the mean tracked frame (8.44 -> 8.51 ms), so the
-period is 2 s, every 20th frame at 10 Hz.
-Elsewhere than glibc it does nothing. The builder's SIFT workers do the opposite
-(:mod:`vbn_common.allocator`): their life is one extraction, so they keep what they free.
+period is 2 s, every 20th frame at 10 Hz. Elsewhere than glibc it does nothing. The
+builder's SIFT workers do the opposite (:mod:`vbn_common.allocator`): their life is one
+extraction, so they keep what they free.
 """
 from __future__ import annotations
 
@@ -71,7 +71,8 @@ class HeapTrimmer:
     def when_idle(self) -> None:
         """Trim if a frame came since the last trim (called when none came for a period).
 
-        A paused bag or a deactivated node then keeps nothing of its last frames resident.
+        A paused bag or a camera that stopped then leaves nothing of the last frames
+        resident.
         """
         if self._pending:
             self._trim()
