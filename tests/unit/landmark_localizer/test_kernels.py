@@ -278,7 +278,7 @@ def test_the_warm_up_compiles_every_kernel_a_tracked_frame_calls() -> None:
                planar_kernels.refine_planar, tilt_kernels.refine_tilted_in_place,
                index._optical_points,
                tracking.disc_mask, tracking._nearest_keypoint,
-               lens._equidistant_newton, lens.brown_invert, lens._brown_project,
+               lens._equidistant_newton, lens.brown_invert, lens.brown_project,
                patch_alignment._brightness_kernel,
                patch_alignment._correlation_kernel, patch_alignment._mosaic,
                patch_alignment._remap_sources]

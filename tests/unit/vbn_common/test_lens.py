@@ -149,14 +149,20 @@ def test_planar_motion_from_distorted_pixels(kind, distortion) -> None:
 
 def test_compiled_brown_projection_is_the_numpy_arithmetic() -> None:
     """Point by point the values of brown_distort on (X / Z, Y / Z), behind the camera too."""
-    from vbn_common.geometry.lens import brown_distort, brown_limit, brown_project
+    from vbn_common.geometry.lens import (
+        brown_coefficients,
+        brown_distort,
+        brown_limit,
+        brown_project,
+    )
 
     rng = np.random.default_rng(9)
     d = np.array([-0.28, 0.09, 0.001, -0.0005, -0.012])
     points = np.column_stack([rng.uniform(-2, 2, (200, 2)), rng.uniform(-0.5, 3, 200)])
     points[:3, 2] = 0.0   # in the camera's plane: infinite or undefined
     limit = brown_limit(d)
-    uv, valid = brown_project(points, 500.0, 501.0, 319.5, 239.5, d, limit)
+    uv, valid = brown_project(points, 500.0, 501.0, 319.5, 239.5,
+                              np.array(brown_coefficients(d)), limit)
     with np.errstate(divide='ignore', invalid='ignore'):
         x, y = points[:, 0] / points[:, 2], points[:, 1] / points[:, 2]
         xd, yd = brown_distort(x, y, d)

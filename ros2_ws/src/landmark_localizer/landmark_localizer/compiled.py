@@ -46,7 +46,7 @@ def warm_up() -> None:
                       np.zeros(2, np.float32), 1.0)
     lens.equidistant_theta(np.array([0.1]), np.zeros(4), 1.5)
     lens.brown_invert(np.ones((1, 2)), 1.0, 1.0, 0.0, 0.0, np.zeros(8))
-    lens.brown_project(np.ones((1, 3)), 1.0, 1.0, 0.0, 0.0, np.zeros(5), 1.0)
+    lens.brown_project(np.ones((1, 3)), 1.0, 1.0, 0.0, 0.0, np.zeros(8), 1.0)
     tiles = np.zeros((1, 5, 5), np.float32)
     _match_brightness(tiles, tiles, 3)
     _correlations(tiles, np.full((1, 2), 2.0, np.float32), tiles, 3)

@@ -75,20 +75,17 @@ def brown_distort(x: np.ndarray, y: np.ndarray, d: np.ndarray) -> tuple[np.ndarr
     return xd, yd
 
 
+@njit(cache=True, error_model='numpy')
 def brown_project(points: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                  d: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
+                  c: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
     """Pixels ``(n, 2)`` of optical-frame points through Brown's distortion, and validity.
 
-    ``valid``: in front (``Z > 0``) and within the undistorted radius ``limit``
-    (:func:`brown_limit`); the image's bounds are the camera's to check. The same
-    arithmetic as :func:`brown_distort` on ``(X / Z, Y / Z)``, point by point, compiled.
+    ``c``: the eight coefficients (:func:`brown_coefficients`), as :func:`brown_invert`
+    takes them. ``valid``: in front (``Z > 0``) and within the undistorted radius
+    ``limit`` (:func:`brown_limit`); the image's bounds are the camera's to check. The
+    same arithmetic as :func:`brown_distort` on ``(X / Z, Y / Z)``, point by point,
+    compiled.
     """
-    return _brown_project(points, fx, fy, cx, cy, np.array(brown_coefficients(d)), limit)
-
-
-@njit(cache=True, error_model='numpy')
-def _brown_project(points: np.ndarray, fx: float, fy: float, cx: float, cy: float,
-                   c: np.ndarray, limit: float) -> tuple[np.ndarray, np.ndarray]:
     n = points.shape[0]
     uv, valid = np.empty((n, 2)), np.empty(n, np.bool_)
     for i in range(n):
