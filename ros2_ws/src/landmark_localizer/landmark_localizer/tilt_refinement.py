@@ -139,9 +139,8 @@ def refine_tilted(initial: np.ndarray, view_poses: np.ndarray, view: np.ndarray,
     a1 = np.ascontiguousarray(np.stack(problem.a1, axis=1))
     r, jac = np.empty(len(a1)), np.empty((len(a1), 6))
     vx, vy = np.ascontiguousarray(problem.vx), np.ascontiguousarray(problem.vy)
-    if not refine_tilted_in_place(state, _M, vx, vy, a1, problem.g2,
-                                  float(threshold), _prior(noise, tilt_prior_deg,
-                                                           height_prior_m),
+    prior = _prior(noise, tilt_prior_deg, height_prior_m)
+    if not refine_tilted_in_place(state, _M, vx, vy, a1, problem.g2, float(threshold), prior,
                                   int(iterations), r, jac):
         return None
     return state, r, jac
