@@ -11,7 +11,7 @@ BUILD_STAMP := $(ROOT)/ros2_ws/install/.colcon-built
 PACKAGING := $(shell find ros2_ws/src -maxdepth 3 \( -name setup.py -o -name setup.cfg \
 	-o -name package.xml -o -path '*/config/*' -o -path '*/resource/*' -o -name CMakeLists.txt \
 	-o -name '*.msg' -o -name '*.srv' -o -name '*.action' -o -name '*.cmake' \) -type f)
-PKGS := landmark_db vbn_common visibility_builder landmark_localizer
+PKGS := vbn_common landmark_db visibility_builder landmark_localizer vbn_worlds vbn_bench
 # tf2_msgs (an ament_cmake interface package) is built from its Jazzy definitions because the
 # ROS 2 wheels have none. CMake finds the wheels' type supports through AMENT_PREFIX_PATH, the
 # upstream linters are not installed (BUILD_TESTING=OFF), and cmake/manylinux_paths.cmake
@@ -20,7 +20,7 @@ TF2_CMAKE_ARGS := -DBUILD_TESTING=OFF \
 	-DCMAKE_PROJECT_INCLUDE=$(ROOT)/ros2_ws/src/tf2_msgs/cmake/manylinux_paths.cmake \
 	-DPython3_EXECUTABLE=$(VENV)/bin/python
 
-.PHONY: setup test lint demo clean sample-bags cache-bags
+.PHONY: setup test test-install lint demo clean sample-bags cache-bags
 
 setup: $(BUILD_STAMP) env.sh
 
@@ -56,6 +56,10 @@ lint: setup
 
 test: setup
 	source env.sh && ruff check . && pytest
+
+# A robot's install: only the runtime packages, in a fresh virtual environment, localizing.
+test-install: setup
+	source env.sh && pytest -m install
 
 demo: setup
 	source env.sh && vbn demo --out out/demo

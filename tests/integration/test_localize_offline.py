@@ -13,8 +13,8 @@ import sys
 import numpy as np
 import pytest
 
-from landmark_localizer.bench.evaluation import evo_ape, pose_accuracy
-from landmark_localizer.bench.pose_bags import read_pose_bag
+from vbn_bench.localization.evaluation import evo_ape, pose_accuracy
+from vbn_bench.localization.pose_bags import read_pose_bag
 
 pytestmark = pytest.mark.integration
 

@@ -1,9 +1,12 @@
 """The package rules, read from the imports (AST): who may import whom, where rclpy may be.
 
-``landmark_db`` imports no project package; ``vbn_common`` only ``landmark_db``; the
-builder and the localizer stand on both and never import each other. rclpy and message
-packages appear only in the ROS glue modules listed here; no source file is over 600
-lines; every ``package.xml`` declares exactly what its package imports.
+``vbn_common`` imports no project package; ``landmark_db`` only ``vbn_common``; the
+builder, the localizer and the worlds stand on both and never import each other; the
+benchmarks stand on all of them and nothing stands on them. rclpy and message packages
+appear only in the ROS glue modules listed here; no source file is over 600 lines; every
+``package.xml`` declares exactly what its package imports; the packages a robot installs
+to localize import no benchmark-only library; and no code of ours runs our own commands
+as subprocesses.
 """
 from __future__ import annotations
 
@@ -16,20 +19,30 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 SRC = ROOT / 'ros2_ws' / 'src'
-PROJECT = ('landmark_db', 'vbn_common', 'visibility_builder', 'landmark_localizer')
+PROJECT = ('vbn_common', 'landmark_db', 'visibility_builder', 'landmark_localizer',
+           'vbn_worlds', 'vbn_bench')
 #: What each package may import of the project (besides itself).
 ALLOWED = {
-    'landmark_db': set(),
-    'vbn_common': {'landmark_db'},
-    'visibility_builder': {'landmark_db', 'vbn_common'},
-    'landmark_localizer': {'landmark_db', 'vbn_common'},
+    'vbn_common': set(),
+    'landmark_db': {'vbn_common'},
+    'visibility_builder': {'vbn_common', 'landmark_db'},
+    'landmark_localizer': {'vbn_common', 'landmark_db'},
+    'vbn_worlds': {'vbn_common', 'landmark_db'},
+    'vbn_bench': {'vbn_common', 'landmark_db', 'visibility_builder', 'landmark_localizer',
+                  'vbn_worlds'},
 }
+#: What a robot that only localizes installs.
+RUNTIME = ('vbn_common', 'landmark_db', 'landmark_localizer')
+#: Libraries only the benchmarks and reports use: no runtime package imports them.
+BENCH_ONLY = {'matplotlib', 'evo', 'pycolmap'}
 #: The ROS glue: the only modules that may import rclpy or message packages.
 GLUE = {
     'vbn_common': {'dds_probe.py', 'node_main.py', 'ros_tools/*', 'cli/*'},
     'visibility_builder': {'builder_node.py'},
     'landmark_localizer': {'node.py', 'node_frames.py', 'conversions.py'},
     'landmark_db': set(),
+    'vbn_worlds': set(),
+    'vbn_bench': set(),
 }
 #: rosdep keys of the third-party modules the packages import (None: pip only, no key;
 #: installed by requirements.txt).
@@ -137,6 +150,44 @@ def test_package_xml_declares_what_the_package_imports(package: str) -> None:
     declared, needed = _declared(package), _needed(package) | BY_TYPE_NAME.get(package, set())
     assert sorted(needed - declared) == [], 'imported but not declared'
     assert sorted(declared - needed) == [], 'declared but not imported'
+
+
+@pytest.mark.parametrize('package', RUNTIME)
+def test_the_runtime_packages_import_no_benchmark_library(package: str) -> None:
+    offenders = [f'{path.relative_to(SRC)}: {module}' for path in _sources(package)
+                 for module in _imports(path) if module.split('.')[0] in BENCH_ONLY]
+    assert offenders == []
+
+
+def _command_lines(text: str) -> list[int]:
+    """Lines that start ``vbn`` or a ``python -m`` of one of our modules as a process."""
+    return [number for number, line in enumerate(text.splitlines(), 1)
+            if ("'-m'" in line and any(f"'{p}." in line for p in PROJECT))
+            or any(f"{opening}'vbn'" in line for opening in '[(,')]
+
+
+#: The one module that names the processes of a ROS graph (the bag tools over DDS, the
+#: probe's echo): a DDS exchange between processes needs processes.
+GRAPH_PROCESSES = SRC / 'vbn_common' / 'vbn_common' / 'graph_processes.py'
+
+
+@pytest.mark.parametrize('package', PROJECT)
+def test_no_code_runs_our_own_commands_as_subprocesses(package: str) -> None:
+    hits = [f'{path.relative_to(SRC)}:{number}' for path in _sources(package)
+            if path != GRAPH_PROCESSES for number in _command_lines(path.read_text())]
+    assert hits == []
+
+
+def test_the_graph_processes_are_the_bag_tools_and_the_probe() -> None:
+    from vbn_common import graph_processes as graph
+
+    assert set(graph.GRAPH_PROCESSES) == {'play', 'record', 'dds_probe'}
+
+
+def test_the_subprocess_rule_catches_a_command() -> None:
+    assert _command_lines("x = 1\nrun([sys.executable, '-m', 'vbn_common.cli.main'])\n") == [2]
+    assert _command_lines("subprocess.run(['vbn', 'build', bag])\n") == [1]
+    assert _command_lines("subprocess.run([sys.executable, '-c', 'while True: pass'])\n") == []
 
 
 def test_the_rules_catch_a_wrong_import(tmp_path: Path) -> None:

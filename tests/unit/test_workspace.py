@@ -8,8 +8,9 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 WS = ROOT / 'ros2_ws'
-PACKAGES = ('landmark_db', 'vbn_common', 'visibility_builder', 'landmark_localizer')
-EXECUTABLES = {'landmark_db': ['vbn'], 'vbn_common': ['dds_probe'],
+PACKAGES = ('vbn_common', 'landmark_db', 'visibility_builder', 'landmark_localizer',
+            'vbn_worlds', 'vbn_bench')
+EXECUTABLES = {'vbn_common': ['vbn', 'dds_probe'],
                'visibility_builder': ['builder'], 'landmark_localizer': ['localizer']}
 
 

@@ -22,14 +22,9 @@ setup(
     description='World instances, region decomposition (rho-MORDP) and the landmark database.',
     license='Apache-2.0',
     entry_points={
-        'console_scripts': [
-            'vbn = landmark_db.cli.main:main',
-        ],
         'vbn.commands': [
             'decompose = landmark_db.cli.decompose:register',
             'validate = landmark_db.cli.validate:register',
-            'simulate = landmark_db.cli.simulate:register',
-            'bench-decomposition = landmark_db.cli.bench_decomposition:register',
             'db-info = landmark_db.cli.db_info:register',
             'db-export = landmark_db.cli.db_export:register',
         ],

@@ -24,11 +24,5 @@ setup(
         'console_scripts': [
             'localizer = landmark_localizer.main:main',
         ],
-        'vbn.commands': [
-            'localize = landmark_localizer.cli.localize:register',
-            'bench-localize = landmark_localizer.cli.bench_localize:register',
-            'bench-integrity = landmark_localizer.cli.bench_integrity:register',
-            'demo = landmark_localizer.cli.demo:register',
-        ],
     },
 )

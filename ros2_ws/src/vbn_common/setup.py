@@ -20,6 +20,7 @@ setup(
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
+            'vbn = vbn_common.cli.main:main',
             'dds_probe = vbn_common.dds_probe_main:main',
         ],
         'vbn.commands': [

@@ -25,12 +25,8 @@ setup(
             'builder = visibility_builder.main:main',
         ],
         'vbn.commands': [
-            'render = visibility_builder.cli.render:register',
             'build = visibility_builder.cli.build:register',
-            'bench-build = visibility_builder.cli.bench_build:register',
             'estimate-poses = visibility_builder.cli.estimate_poses:register',
-            'bench-estimate = visibility_builder.cli.bench_estimate:register',
-            'bench-strecha = visibility_builder.cli.bench_strecha:register',
             'db-update = visibility_builder.cli.db_update:register',
         ],
     },

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import pytest
 
-from landmark_db.cli.assignments import parse_assignments
-from landmark_db.errors import VbnError
+from vbn_common.cli.assignments import parse_assignments
+from vbn_common.errors import VbnError
 
 
 def test_values_are_yaml_scalars_and_names_are_stripped() -> None:

@@ -1,4 +1,4 @@
-"""Tests of landmark_db.atomic: output appears whole on success, never on failure."""
+"""Tests of vbn_common.atomic: output appears whole on success, never on failure."""
 from __future__ import annotations
 
 import os
@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from landmark_db import atomic
-from landmark_db.atomic import atomic_output, write_bytes_atomic, write_text_atomic
-from landmark_db.errors import LandmarkDbError
+from vbn_common import atomic
+from vbn_common.atomic import atomic_output, write_bytes_atomic, write_text_atomic
+from vbn_common.errors import VbnCommonError
 
 
 def _leftovers(folder: Path) -> list[str]:
@@ -126,7 +126,7 @@ def test_directory_failed_rename_restores_previous_folder(
         real_rename(source, destination)
 
     monkeypatch.setattr(atomic.os, 'rename', rename)
-    with pytest.raises(LandmarkDbError, match=r'^cannot write .*bag \(No space left'):
+    with pytest.raises(VbnCommonError, match=r'^cannot write .*bag \(No space left'):
         with atomic_output(target, directory=True) as temporary:
             temporary.mkdir()
             (temporary / 'new.mcap').write_bytes(b'new')
@@ -135,7 +135,7 @@ def test_directory_failed_rename_restores_previous_folder(
 
 
 def test_directory_output_that_writes_nothing_is_an_error(tmp_path: Path) -> None:
-    with pytest.raises(LandmarkDbError, match='nothing was written'):
+    with pytest.raises(VbnCommonError, match='nothing was written'):
         with atomic_output(tmp_path / 'bag', directory=True):
             pass
     assert list(tmp_path.iterdir()) == []
@@ -143,7 +143,7 @@ def test_directory_output_that_writes_nothing_is_an_error(tmp_path: Path) -> Non
 
 def test_missing_folder_names_the_folder(tmp_path: Path) -> None:
     folder = tmp_path / 'no' / 'such'
-    with pytest.raises(LandmarkDbError) as caught:
+    with pytest.raises(VbnCommonError) as caught:
         write_text_atomic(folder / 'x.json', 'x')
     assert str(caught.value) == f'output folder {folder} does not exist'
     assert '.tmp' not in str(caught.value)
@@ -152,13 +152,13 @@ def test_missing_folder_names_the_folder(tmp_path: Path) -> None:
 
 def test_parent_that_is_a_file_is_reported(tmp_path: Path) -> None:
     (tmp_path / 'plain').write_text('x')
-    with pytest.raises(LandmarkDbError, match='is not a folder'):
+    with pytest.raises(VbnCommonError, match='is not a folder'):
         write_text_atomic(tmp_path / 'plain' / 'x.json', 'x')
 
 
 def test_file_output_onto_a_folder_is_reported(tmp_path: Path) -> None:
     (tmp_path / 'out').mkdir()
-    with pytest.raises(LandmarkDbError, match='is a folder; expected a file name'):
+    with pytest.raises(VbnCommonError, match='is a folder; expected a file name'):
         write_text_atomic(tmp_path / 'out', 'x')
     assert (tmp_path / 'out').is_dir()
 
@@ -170,7 +170,7 @@ def test_readonly_folder_by_access_check(tmp_path: Path,
     real_access = os.access
     monkeypatch.setattr(atomic.os, 'access',
                         lambda p, mode: False if Path(p) == tmp_path else real_access(p, mode))
-    with pytest.raises(LandmarkDbError) as caught:
+    with pytest.raises(VbnCommonError) as caught:
         write_text_atomic(tmp_path / 'x.json', 'x')
     assert str(caught.value) == f'output folder {tmp_path} is not writable'
     assert list(tmp_path.iterdir()) == []
@@ -182,7 +182,7 @@ def test_readonly_folder_for_real(tmp_path: Path) -> None:
     folder.mkdir()
     folder.chmod(0o555)
     try:
-        with pytest.raises(LandmarkDbError, match=f'^output folder {folder} is not writable$'):
+        with pytest.raises(VbnCommonError, match=f'^output folder {folder} is not writable$'):
             write_text_atomic(folder / 'x.json', 'x')
     finally:
         folder.chmod(0o755)
@@ -195,6 +195,6 @@ def test_permission_error_creating_the_temporary_names_the_folder(
         raise PermissionError(13, 'Permission denied')
 
     monkeypatch.setattr(atomic.os, 'open', refuse)
-    with pytest.raises(LandmarkDbError) as caught:
+    with pytest.raises(VbnCommonError) as caught:
         write_text_atomic(tmp_path / 'x.json', 'x')
     assert str(caught.value) == f'output folder {tmp_path} is not writable'

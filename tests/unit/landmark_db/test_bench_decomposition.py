@@ -8,14 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landmark_db.bench.reference import THESIS_TABLE_8_2, THESIS_TABLE_8_3, THESIS_TABLE_8_4
-from landmark_db.bench.report import (
+from landmark_db.errors import LandmarkDbError
+from vbn_bench.cli import bench_decomposition
+from vbn_bench.decomposition.reference import THESIS_TABLE_8_2, THESIS_TABLE_8_3, THESIS_TABLE_8_4
+from vbn_bench.decomposition.report import (
     approximation_ratios,
     format_report,
     improvement_over_b2,
     summarize,
 )
-from landmark_db.bench.runner import (
+from vbn_bench.decomposition.runner import (
     REDUCED,
     SMALL,
     BenchConfig,
@@ -23,8 +25,6 @@ from landmark_db.bench.runner import (
     planned_worlds,
     run_benchmark,
 )
-from landmark_db.cli import bench_decomposition
-from landmark_db.errors import LandmarkDbError
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
@@ -158,7 +158,7 @@ def test_reference_tables_are_complete() -> None:
 
 
 def test_scaling_world_meets_its_targets() -> None:
-    from landmark_db.bench.scaling import format_scaling, run_scaling, scaling_world
+    from vbn_bench.decomposition.scaling import format_scaling, run_scaling, scaling_world
 
     simulated = scaling_world(2_000, 600, seed=1)
     assert simulated.world.n_features == 600
@@ -170,7 +170,7 @@ def test_scaling_world_meets_its_targets() -> None:
 
 def test_scaling_and_calibration_write_their_files(tmp_path: Path, capsys: pytest.CaptureFixture,
                                                    monkeypatch: pytest.MonkeyPatch) -> None:
-    from landmark_db.bench import scaling
+    from vbn_bench.decomposition import scaling
 
     monkeypatch.setattr(scaling, 'DEFAULT_SIZES', ((600, 200),))
     args = _parse(['--scaling', '--scaling-algorithms', 'B1,B2', '--out', str(tmp_path)])

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from landmark_db.cli import main as cli_main
+from vbn_common.cli import main as cli_main
 
 _OURS = {
     'decompose': 'landmark_db.cli.decompose:register',

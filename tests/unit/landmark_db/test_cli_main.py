@@ -6,8 +6,8 @@ from importlib import metadata
 import pytest
 
 from landmark_db import __version__
-from landmark_db.cli import main as cli_main
-from landmark_db.errors import VbnError
+from vbn_common.cli import main as cli_main
+from vbn_common.errors import VbnError
 
 
 def test_version(capsys):

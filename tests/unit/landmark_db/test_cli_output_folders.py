@@ -11,12 +11,12 @@ from pathlib import Path
 
 import pytest
 
-from landmark_db.cli import main as cli_main
+from vbn_common.cli import main as cli_main
 
 _OURS = {
-    'simulate': 'landmark_db.cli.simulate:register',
+    'simulate': 'vbn_worlds.cli.simulate:register',
     'decompose': 'landmark_db.cli.decompose:register',
-    'bench-decomposition': 'landmark_db.cli.bench_decomposition:register',
+    'bench-decomposition': 'vbn_bench.cli.bench_decomposition:register',
 }
 
 LINE = {'poses': [[0, 0], [1, 0], [2, 0]], 'edges': [[0, 1], [1, 2]],

@@ -18,6 +18,7 @@ from landmark_db.database import (
 )
 from landmark_db.decomposition import validate
 from landmark_db.errors import LandmarkDbError
+from vbn_common.errors import VbnCommonError
 
 
 def view(pose, class_ids, seed=0):
@@ -193,7 +194,7 @@ def test_database_refuses_out_of_range_indices():
 
 
 def test_write_refuses_a_missing_folder_and_non_database(tmp_path):
-    with pytest.raises(LandmarkDbError, match='does not exist'):
+    with pytest.raises(VbnCommonError, match='does not exist'):
         write_database(tmp_path / 'nope' / 'x.db', line_database())
     with pytest.raises(LandmarkDbError, match='LandmarkDatabase'):
         write_database(tmp_path / 'x.db', {'regions': []})

@@ -12,8 +12,8 @@ from database_samples import sample_database
 import numpy as np
 import pytest
 
-from landmark_db.cli import main as cli_main
 from landmark_db.database import write_database
+from vbn_common.cli import main as cli_main
 
 _OURS = {
     'db-info': 'landmark_db.cli.db_info:register',
@@ -109,7 +109,7 @@ def test_installed_vbn_runs_db_info(db_file):
     """The installed ``vbn`` (colcon entry points) knows the commands."""
     path, _ = db_file
     vbn_exe = shutil.which('vbn')
-    command = [vbn_exe] if vbn_exe else [sys.executable, '-m', 'landmark_db.cli.main']
+    command = [vbn_exe] if vbn_exe else [sys.executable, '-m', 'vbn_common.cli.main']
     done = subprocess.run([*command, 'db-info', str(path)], capture_output=True, text=True,
                           env=dict(os.environ), timeout=120)
     if 'invalid choice' in done.stderr:

@@ -7,14 +7,14 @@ import inspect
 
 import pytest
 
-from landmark_db.bench.runner import BenchConfig
-from landmark_db.bench.scaling import run_scaling
 from landmark_db.cli import decompose as decompose_cli
-from landmark_db.cli import simulate as simulate_cli
 from landmark_db.decomposition import decompose
 from landmark_db.decomposition.best import best_cover
 from landmark_db.decomposition.exact import exact_cover
 from landmark_db.defaults import DECOMPOSITION, POSE_SPACING, THESIS
+from vbn_bench.decomposition.runner import BenchConfig
+from vbn_bench.decomposition.scaling import run_scaling
+from vbn_worlds.cli import simulate as simulate_cli
 
 
 def test_thesis_parameters_are_section_8_2s() -> None:

@@ -5,14 +5,14 @@ from pathlib import Path
 
 import numpy as np
 
-from landmark_db.plotting import (
-    _mask_outline,
-    grid_cells,
-    region_colours,
-    save_decomposition_figure,
-)
 from landmark_db.scene import Scene
 from landmark_db.world import WorldInstance
+from vbn_common.palette import PALETTE_HEX, region_colours
+from visibility_builder.plotting import (
+    _mask_outline,
+    grid_cells,
+    save_decomposition_figure,
+)
 
 
 def _grid_world(nx: int = 6, ny: int = 4) -> WorldInstance:
@@ -63,3 +63,13 @@ def test_region_colours_are_distinct_and_reproducible() -> None:
     assert a.shape == (30, 4)
     assert len({tuple(c) for c in a}) == 30
     np.testing.assert_array_equal(a, region_colours(30))
+
+
+def test_the_palette_is_matplotlibs_tab20_tab20b_and_set3() -> None:
+    from matplotlib import colormaps
+
+    theirs = np.concatenate([colormaps[name](np.arange(colormaps[name].N))
+                             for name in ('tab20', 'tab20b', 'Set3')])
+    assert len(PALETTE_HEX) == 52
+    np.testing.assert_array_equal(region_colours(52, seed=0)[np.argsort(
+        np.random.default_rng(0).permutation(52))], theirs)

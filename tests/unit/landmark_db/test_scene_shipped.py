@@ -11,7 +11,7 @@ from scipy.spatial import cKDTree
 
 from landmark_db.errors import LandmarkDbError
 from landmark_db.scenes import resolve_scene, shipped_scene_names
-from visibility_builder.synthesis.grid import exploration_poses
+from vbn_worlds.synthesis.grid import exploration_poses
 
 
 def test_shipped_scene_names():

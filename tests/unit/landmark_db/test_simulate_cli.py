@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from landmark_db.cli import simulate
-from landmark_db.errors import LandmarkDbError
 from landmark_db.scene import load_scene
 from landmark_db.world import load_world
+from vbn_worlds.cli import simulate
+from vbn_worlds.errors import WorldsError
 
 
 def _run(argv: list[str]) -> int:
@@ -59,5 +59,5 @@ def test_simulate_spacing_option(tmp_path: Path) -> None:
     (['--seed', '0', '--spacing', 'nan'], 'spacing'),
 ])
 def test_simulate_rejects_bad_input(tmp_path: Path, argv: list[str], message: str) -> None:
-    with pytest.raises(LandmarkDbError, match=message):
+    with pytest.raises(WorldsError, match=message):
         _run(['--setting', '1', *argv, '--out', str(tmp_path / 'w.json')])

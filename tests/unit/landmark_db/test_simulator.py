@@ -8,14 +8,14 @@ from hypothesis import strategies as st
 import numpy as np
 import pytest
 
-from landmark_db.errors import LandmarkDbError
 from landmark_db.geometry2d import segments_blocked
 from landmark_db.scene import Scene, SceneFeatures, points_in_polygon
-from landmark_db.simulator.grid import pose_grid
-from landmark_db.simulator.scene_sampler import inward_normals, random_scene
-from landmark_db.simulator.settings import SETTINGS, get_setting, small_setting
-from landmark_db.simulator.simulate import simulate_world, world_rng
-from landmark_db.simulator.visibility import compute_visibility
+from vbn_worlds.errors import WorldsError
+from vbn_worlds.simulator.grid import pose_grid
+from vbn_worlds.simulator.scene_sampler import inward_normals, random_scene
+from vbn_worlds.simulator.settings import SETTINGS, get_setting, small_setting
+from vbn_worlds.simulator.simulate import simulate_world, world_rng
+from vbn_worlds.simulator.visibility import compute_visibility
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 BLOCK = np.array([[4.0, 4.0], [6.0, 4.0], [6.0, 6.0], [4.0, 6.0]])
@@ -148,7 +148,7 @@ def test_pose_grid_avoids_obstacles_and_blocked_edges() -> None:
 
 
 def test_pose_grid_rejects_bad_spacing() -> None:
-    with pytest.raises(LandmarkDbError, match='spacing'):
+    with pytest.raises(WorldsError, match='spacing'):
         pose_grid(Scene(SQUARE), 0.0)
 
 

@@ -5,8 +5,8 @@ import math
 
 import pytest
 
-from landmark_db.errors import LandmarkDbError
-from landmark_db.workers import map_in_processes
+from vbn_common.errors import VbnCommonError
+from vbn_common.workers import map_in_processes
 
 
 def test_results_come_in_order_with_progress():
@@ -34,7 +34,7 @@ def test_a_worker_that_dies_is_an_error_not_a_hang():
     # os._exit in a worker (as the OOM killer's SIGKILL): multiprocessing.Pool would
     # replace the worker, lose the task and wait for ever.
     import os
-    with pytest.raises(LandmarkDbError, match='a worker process died'):
+    with pytest.raises(VbnCommonError, match='a worker process died'):
         map_in_processes(os._exit, [3, 3], 2)
 
 
@@ -82,7 +82,7 @@ def test_a_script_without_a_main_guard_runs_once(tmp_path):
     import sys
 
     script = tmp_path / 'unguarded.py'
-    script.write_text('import math\nfrom landmark_db.workers import map_in_processes\n'
+    script.write_text('import math\nfrom vbn_common.workers import map_in_processes\n'
                       "print('top level ran', flush=True)\n"
                       'print(map_in_processes(math.sqrt, [4.0, 9.0, 16.0], 2))\n')
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,

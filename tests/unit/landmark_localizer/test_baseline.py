@@ -5,12 +5,12 @@ from pathlib import Path
 
 import numpy as np
 
-from landmark_localizer.bench.baseline import (
+from landmark_localizer.localizer import LOST, Frame
+from vbn_bench.localization.baseline import (
     FullDatabaseLocalizer,
     FullFeatureDatabase,
     load_full_database,
 )
-from landmark_localizer.localizer import LOST, Frame
 from vbn_common.features import SiftConfig
 
 PANORAMA = (1024, 256, 'cylindrical', np.zeros(0),

@@ -1,7 +1,7 @@
 """vbn bench-localize's table: the room runs carry the targets, floor_run is reported."""
 from __future__ import annotations
 
-from landmark_localizer.bench.report import report
+from vbn_bench.localization.report import report
 
 
 def figures(availability: float, median: float, p95: float, tracking_p95: float,
@@ -79,9 +79,9 @@ def test_conditions_carry_the_real_cameras_targets() -> None:
 def test_condition_names_parse_and_pitch2_brings_its_reference() -> None:
     import pytest
 
-    from landmark_localizer.bench.conditions import CONDITIONS, lens_render_argv
-    from landmark_localizer.cli.bench_localize import _conditions
     from landmark_localizer.errors import LocalizerError
+    from vbn_bench.cli.bench_localize import _conditions
+    from vbn_bench.localization.conditions import CONDITIONS, lens_render_argv
 
     assert _conditions('') == []
     assert _conditions('all') == list(CONDITIONS)
@@ -126,15 +126,15 @@ def test_runs_at_more_seeds_are_summed_up_per_run_and_each_carries_the_targets()
 def test_seed_runs_render_the_run_they_repeat_with_the_seed() -> None:
     import pytest
 
-    from landmark_localizer.bench.conditions import lens_render_argv
-    from landmark_localizer.bench.seeds import (
+    from landmark_localizer.errors import LocalizerError
+    from vbn_bench.localization.conditions import lens_render_argv
+    from vbn_bench.localization.seeds import (
         family_of,
         parse_seeds,
         seed_bag_name,
         seed_render_argv,
         seed_run_name,
     )
-    from landmark_localizer.errors import LocalizerError
 
     assert parse_seeds('') == [] and parse_seeds('3,11') == [3, 11]
     for bad in ('3,x', '-1', '4,4', '0', '1\u00b2', '\u0661'):

@@ -4,9 +4,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from landmark_localizer.bench.demo import LENS_MAX_ERROR_M, LENS_TARGETS
-from landmark_localizer.bench.evaluation import Thresholds
-from landmark_localizer.cli import demo
+from vbn_bench.cli import demo
+from vbn_bench.localization.demo import LENS_MAX_ERROR_M, LENS_TARGETS
+from vbn_bench.localization.evaluation import Thresholds
 
 
 def _args(**values) -> argparse.Namespace:
@@ -17,7 +17,7 @@ def _args(**values) -> argparse.Namespace:
 
 def test_panoramic_demo_uses_the_sample_bags(tmp_path: Path) -> None:
     args = _args(out=str(tmp_path))
-    demo._bags(args, tmp_path, {})
+    demo._bags(args, tmp_path)
     assert (args.exploration, args.run) == ('bags/room_exploration', 'bags/room_run')
 
 
@@ -27,9 +27,9 @@ def test_lens_demo_reuses_its_rendered_bags(tmp_path: Path, monkeypatch) -> None
         bag.mkdir()
         (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: {}\n')
     calls = []
-    monkeypatch.setattr(demo.subprocess, 'run', lambda *a, **k: calls.append(a))
+    monkeypatch.setattr(demo, 'run_command', lambda *a, **k: calls.append(a))
     args = _args(out=str(tmp_path), camera='pinhole')
-    demo._bags(args, tmp_path, {})
+    demo._bags(args, tmp_path)
     assert args.exploration == str(tmp_path / 'room_exploration_pinhole')
     assert args.run == str(tmp_path / 'room_run_pinhole')
     assert calls == []                                  # nothing rendered again
@@ -38,19 +38,16 @@ def test_lens_demo_reuses_its_rendered_bags(tmp_path: Path, monkeypatch) -> None
 def test_lens_demo_renders_what_is_missing(tmp_path: Path, monkeypatch) -> None:
     calls = []
 
-    class Done:
-        returncode = 0
-
-    def fake_run(argv, **kwargs):
+    def fake_run(argv, log, **kwargs):
         calls.append(argv)
-        return Done()
 
-    monkeypatch.setattr(demo.subprocess, 'run', fake_run)
+    monkeypatch.setattr(demo, 'run_command', fake_run)
     args = _args(out=str(tmp_path), camera='fisheye', run='my_run')
-    demo._bags(args, tmp_path, {})
+    demo._bags(args, tmp_path)
     assert args.run == 'my_run'                          # given: kept
     assert len(calls) == 1
     argv = calls[0]
+    assert argv[0] == 'render'
     assert argv[argv.index('--kind') + 1] == 'exploration'
     assert argv[argv.index('--headings') + 1] == str(demo.LENS_HEADINGS)
     assert argv[argv.index('--camera') + 1] == 'fisheye'
@@ -66,7 +63,7 @@ def test_lens_targets_are_the_issues() -> None:
 
 
 def test_the_demo_load_is_busy_processes_that_go_away() -> None:
-    from landmark_localizer.cli.demo import _busy
+    from vbn_bench.cli.demo import _busy
 
     hogs = _busy(2)
     try:

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from landmark_localizer.bench.evaluation import (
+from vbn_bench.localization.evaluation import (
     Thresholds,
     associate,
     check_run,
@@ -17,7 +17,7 @@ from landmark_localizer.bench.evaluation import (
     pose_accuracy,
     recovery_frames,
 )
-from landmark_localizer.bench.offline import interpolate_poses
+from vbn_bench.localization.offline import interpolate_poses
 
 MS = 10**6
 
@@ -166,7 +166,7 @@ def test_interpolated_odometry() -> None:
 
 
 def test_the_trajectory_colour_scale_reaches_the_largest_error():
-    from landmark_localizer.bench.plots import error_scale_cm
+    from vbn_bench.localization.plots import error_scale_cm
     low, high = error_scale_cm(np.array([0.004, 0.008, 0.199]))   # a 19.9 cm outlier
     assert low == 0.1 and high == pytest.approx(19.9)
     assert error_scale_cm(np.array([0.0001])) == (0.1, 0.2)

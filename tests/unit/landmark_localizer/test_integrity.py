@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from landmark_db.scene import Scene
-from landmark_localizer.bench.integrity import CHI2_2DOF_3SIGMA, integrity_figures
-from landmark_localizer.bench.worlds import RUNS, hall_scene, run_argv, targets, update_failures
+from vbn_bench.localization.integrity import CHI2_2DOF_3SIGMA, integrity_figures
+from vbn_bench.localization.worlds import RUNS, hall_scene, run_argv, targets, update_failures
 
 S = 10**8   # 10 Hz
 

@@ -208,9 +208,9 @@ def test_a_region_running_low_switches_at_once(world, monkeypatch) -> None:
 def test_coverage_split_by_the_database_regions(world) -> None:
     from pathlib import Path
 
-    from landmark_localizer.bench.offline import OfflineRun, coverage_split
-    from landmark_localizer.bench.pose_bags import RunBag
     from landmark_localizer.localizer import Estimate
+    from vbn_bench.localization.offline import OfflineRun, coverage_split
+    from vbn_bench.localization.pose_bags import RunBag
 
     _, index = world
     stamps = np.array([0, 10**8, 2 * 10**8], np.int64)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from landmark_localizer.node_frames import FrameHandling
+from vbn_common.bags import messages
 from vbn_common.geometry.mount import tilt_matrix
-from visibility_builder.synthesis import messages
 
 
 def _node(lines: list[str], warnings: list[str] | None = None) -> types.SimpleNamespace:

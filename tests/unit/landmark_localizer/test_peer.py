@@ -6,8 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from landmark_localizer.bench.peer import _FACES, PeerConfig, PeerLocalizer, cube_faces
-from landmark_localizer.bench.peer_map import (
+from landmark_localizer.errors import LocalizerError
+from vbn_bench.localization.peer import _FACES, PeerConfig, PeerLocalizer, cube_faces
+from vbn_bench.localization.peer_map import (
     PeerMap,
     _epipolar_ok,
     _errors,
@@ -15,8 +16,7 @@ from landmark_localizer.bench.peer_map import (
     _triangulate,
     world_rays,
 )
-from landmark_localizer.bench.peer_report import peer_table, peer_targets
-from landmark_localizer.errors import LocalizerError
+from vbn_bench.localization.peer_report import peer_table, peer_targets
 from vbn_common.features import SiftConfig
 from vbn_common.geometry.camera import make_camera
 from vbn_common.geometry.frames import BASE_TO_CAMERA_ROTATION
@@ -183,7 +183,7 @@ def _fake_exploration(monkeypatch, n_features: int) -> None:
     """Two exploration images 0.5 m apart whose SIFT features are random (none match)."""
     from types import SimpleNamespace
 
-    import landmark_localizer.bench.peer_map as peer_map
+    import vbn_bench.localization.peer_map as peer_map
     import vbn_common.exploration as exploration
 
     camera = make_camera('panoramic', 256, 64)
@@ -208,7 +208,7 @@ class _Found:
 def test_a_map_with_too_few_points_is_refused(monkeypatch, tmp_path) -> None:
     # Random descriptors match nothing: no point triangulates. FLANN's index over zero
     # descriptors crashed the process; both the builder and the localizer refuse it.
-    from landmark_localizer.bench.peer_map import MIN_POINTS, build_peer_map
+    from vbn_bench.localization.peer_map import MIN_POINTS, build_peer_map
 
     _fake_exploration(monkeypatch, 50)
     with pytest.raises(LocalizerError, match='only 0 SIFT tracks triangulate'):
@@ -220,7 +220,7 @@ def test_a_map_with_too_few_points_is_refused(monkeypatch, tmp_path) -> None:
 
 
 def test_the_cache_key_follows_the_bag_and_the_settings(tmp_path) -> None:
-    from landmark_localizer.bench.peer_map import PeerMapConfig, source_key
+    from vbn_bench.localization.peer_map import PeerMapConfig, source_key
 
     bag = tmp_path / 'bag'
     bag.mkdir()
@@ -236,6 +236,6 @@ def test_the_cache_key_follows_the_bag_and_the_settings(tmp_path) -> None:
     peer = _map(np.ones((12, 3)), camera)
     from dataclasses import replace
 
-    from landmark_localizer.bench.peer_map import load_peer_map
+    from vbn_bench.localization.peer_map import load_peer_map
     replace(peer, source=key).save(saved)
     assert load_peer_map(saved).source == key

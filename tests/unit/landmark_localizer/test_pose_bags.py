@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from landmark_localizer.bench.evaluation import evo_ape, pose_accuracy
-from landmark_localizer.bench.pose_bags import PoseRecord, read_pose_bag, write_pose_bag
+from vbn_bench.localization.evaluation import evo_ape, pose_accuracy
+from vbn_bench.localization.pose_bags import PoseRecord, read_pose_bag, write_pose_bag
 from vbn_common.bags import TYPESTORE, serialize
 from vbn_common.geometry.frames import wrap_angle, yaw_quaternion
 

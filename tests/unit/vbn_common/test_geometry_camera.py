@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 import numpy as np
 import pytest
 
-from vbn_common.bags import deserialize, open_bag, serialize
+from vbn_common.bags import deserialize, messages, open_bag, serialize
 from vbn_common.errors import VbnCommonError
 from vbn_common.geometry.camera import (
     PanoramicCamera,
@@ -19,7 +19,6 @@ from vbn_common.geometry.camera import (
     camera_from_info,
     make_camera,
 )
-from visibility_builder.synthesis import messages
 
 PANO = PanoramicCamera(1024, 256)
 PIN = PinholeCamera.from_fov(640, 480, 90.0)

@@ -1,7 +1,7 @@
 """Algorithm 6.3, verification and filters on the rendered room bag, against ground truth.
 
 The renderer knows the wall point behind every keypoint, so each class's purity is
-measured (visibility_builder.purity). The classes are those of the builder's
+measured (vbn_bench.purity). The classes are those of the builder's
 defaults: Algorithm 6.3 (feature exclusion), then the geometric verification. The
 fast test uses a 10 x 6 window of the exploration lattice; the bench test the whole
 bag (200 panoramas).
@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 
 from landmark_db.scenes import resolve_scene
+from vbn_bench.purity import class_purity, keypoint_wall_points
 from vbn_common.exploration import read_exploration
 from vbn_common.features import extract_many
 from vbn_common.geometry.camera import make_camera
+from vbn_worlds.render.renderer import Renderer
 from visibility_builder.classes import ClassConfig, correspondence_classes
 from visibility_builder.filters import FilterConfig, retain_good_features
-from visibility_builder.purity import class_purity, keypoint_wall_points
-from visibility_builder.render.renderer import Renderer
 from visibility_builder.verification import VerifyConfig, verify_classes
 
 ROOM = Path(__file__).resolve().parents[3] / 'bags' / 'room_exploration'

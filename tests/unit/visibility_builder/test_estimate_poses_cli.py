@@ -6,12 +6,12 @@ import json
 import numpy as np
 import pytest
 
-from landmark_db.cli.main import main as vbn_main
 from landmark_db.scenes import resolve_scene
 from vbn_common.bags import open_bag
+from vbn_common.cli.main import main as vbn_main
 from vbn_common.exploration import ReadConfig, read_exploration
+from vbn_worlds.synthesis.bags import BagSpec, write_bag
 from visibility_builder.estimation.accuracy import pose_errors
-from visibility_builder.synthesis.bags import BagSpec, write_bag
 
 
 @pytest.fixture(scope='module')

@@ -8,7 +8,7 @@ import pytest
 
 from landmark_db.scenes import resolve_scene
 from vbn_common.geometry.camera import make_camera
-from visibility_builder.render.renderer import Renderer
+from vbn_worlds.render.renderer import Renderer
 
 
 @pytest.mark.bench

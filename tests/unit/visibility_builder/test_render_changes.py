@@ -14,13 +14,13 @@ import pytest
 
 from landmark_db.scene import Scene
 from vbn_common.geometry.camera import PanoramicCamera
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.render.renderer import Occluders, Renderer
-from visibility_builder.render.textures import Appearance, build_wall_atlas
-from visibility_builder.synthesis.bags import BagSpec, write_bag
-from visibility_builder.synthesis.people import walkers
-from visibility_builder.synthesis.trajectory import run_trajectory
-from visibility_builder.synthesis.world_changes import (
+from vbn_worlds.errors import WorldsError
+from vbn_worlds.render.renderer import Occluders, Renderer
+from vbn_worlds.render.textures import Appearance, build_wall_atlas
+from vbn_worlds.synthesis.bags import BagSpec, write_bag
+from vbn_worlds.synthesis.people import walkers
+from vbn_worlds.synthesis.trajectory import run_trajectory
+from vbn_worlds.synthesis.world_changes import (
     Furniture,
     WorldChanges,
     load_changes,
@@ -107,18 +107,18 @@ def test_change_sets_round_trip_and_bad_ones_are_named(tmp_path: Path) -> None:
     assert back.appearance == changes.appearance and back.people == 2 and back.seed == 4
     np.testing.assert_array_equal(back.furniture[0].footprint, TABLE)
     back.check(SQUARE)
-    with pytest.raises(VisibilityBuilderError, match='posters bare wall 9'):
+    with pytest.raises(WorldsError, match='posters bare wall 9'):
         WorldChanges(appearance=Appearance(bare=(9,))).check(SQUARE)
     outside = Furniture(TABLE + 5.0, 0.75)
-    with pytest.raises(VisibilityBuilderError, match=r'furniture\[0\] does not stand'):
+    with pytest.raises(WorldsError, match=r'furniture\[0\] does not stand'):
         WorldChanges((outside,)).check(SQUARE)
     path.write_text('{"furniture": [{"footprint": [[0, 0], [1, 1]], "height": 1}]}')
-    with pytest.raises(VisibilityBuilderError, match='footprint must be three or more'):
+    with pytest.raises(WorldsError, match='footprint must be three or more'):
         load_changes(path)
     path.write_text('{"chairs": 3}')
-    with pytest.raises(VisibilityBuilderError, match="unknown field 'chairs'"):
+    with pytest.raises(WorldsError, match="unknown field 'chairs'"):
         load_changes(path)
-    with pytest.raises(VisibilityBuilderError, match='missing.json'):
+    with pytest.raises(WorldsError, match='missing.json'):
         load_changes(tmp_path / 'missing.json')
 
 
@@ -179,7 +179,7 @@ def test_a_changed_world_run_bag_goes_round_the_furniture(tmp_path: Path) -> Non
     spec = BagSpec(kind='run', width=128, height=32, duration=4.0, seed=1, changes=changes)
     summary = write_bag(HALL, spec, tmp_path / 'run')
     assert summary.images == 41
-    with pytest.raises(VisibilityBuilderError, match='does not stand'):
+    with pytest.raises(WorldsError, match='does not stand'):
         write_bag(HALL, BagSpec(kind='run', width=128, height=32, duration=1.0,
                                 changes=WorldChanges((Furniture(TABLE + 20.0, 0.8),))),
                   tmp_path / 'bad')

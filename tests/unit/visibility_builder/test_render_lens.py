@@ -8,10 +8,10 @@ from landmark_db.scene import Scene
 from vbn_common.geometry.camera import PinholeCamera, make_camera
 from vbn_common.geometry.frames import world_points_to_camera
 from vbn_common.geometry.mount import TiltedCamera, tilt_matrix
-from visibility_builder.render.lens_view import LensRenderer, make_renderer
-from visibility_builder.render.renderer import Renderer
-from visibility_builder.render.textures import build_wall_atlas
-from visibility_builder.synthesis.bags import BagSpec
+from vbn_worlds.render.lens_view import LensRenderer, make_renderer
+from vbn_worlds.render.renderer import Renderer
+from vbn_worlds.render.textures import build_wall_atlas
+from vbn_worlds.synthesis.bags import BagSpec
 
 SQUARE = Scene(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]),
                obstacles=(np.array([[3.0, 3.0], [3.5, 3.0], [3.5, 3.5], [3.0, 3.5]]),),
@@ -85,6 +85,6 @@ def test_bag_spec_takes_the_lens_and_names_bad_ones() -> None:
     spec = BagSpec(camera='fisheye', distortion=FISHEYE, hfov_deg=190.0)
     info = spec.camera_model().camera_info()
     assert info.distortion_model == 'equidistant' and info.d == FISHEYE[1]
-    from visibility_builder.errors import VisibilityBuilderError
-    with pytest.raises(VisibilityBuilderError, match='a pinhole camera takes plumb_bob'):
+    from vbn_common.errors import VbnCommonError
+    with pytest.raises(VbnCommonError, match='a pinhole camera takes plumb_bob'):
         BagSpec(camera='pinhole', distortion=FISHEYE).check()

@@ -10,8 +10,8 @@ import pytest
 from landmark_db.scene import Scene
 from vbn_common.geometry.camera import PanoramicCamera, PinholeCamera
 from vbn_common.geometry.frames import world_points_to_camera
-from visibility_builder.render.renderer import Renderer, cast_rays
-from visibility_builder.render.textures import build_wall_atlas
+from vbn_worlds.render.renderer import Renderer, cast_rays
+from vbn_worlds.render.textures import build_wall_atlas
 
 # A 4 m x 4 m room (counter-clockwise) with a 0.5 m pillar, walls 2.5 m, camera at 1.2 m.
 SQUARE = Scene(np.array([[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0]]),

@@ -7,9 +7,9 @@ import pytest
 
 from landmark_db.scenes import resolve_scene
 from vbn_common.geometry.camera import make_camera
-from visibility_builder.render.effects import ImageEffects, apply_effects
-from visibility_builder.render.renderer import Renderer
-from visibility_builder.render.textures import sample_photographs
+from vbn_worlds.render.effects import ImageEffects, apply_effects
+from vbn_worlds.render.renderer import Renderer
+from vbn_worlds.render.textures import sample_photographs
 
 
 @pytest.fixture(scope='module')

@@ -11,9 +11,9 @@ from scipy.sparse.csgraph import connected_components
 
 from landmark_db.scenes import resolve_scene
 from vbn_common.exploration import read_exploration
+from vbn_worlds.synthesis.bags import BagSpec, write_bag
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.sampled_poses import PoseSampling, SamplingConfig, sample_poses
-from visibility_builder.synthesis.bags import BagSpec, write_bag
 
 ROOT = Path(__file__).resolve().parents[3]
 HEADINGS = np.radians([0.0, 90.0, 180.0, -90.0])

@@ -10,12 +10,12 @@ import pytest
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from landmark_db.cli.main import main as vbn_main
 from landmark_db.scenes import resolve_scene
+from vbn_common.cli.main import main as vbn_main
 from vbn_common.geometry.frames import compose_poses
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.synthesis.bags import START_NS, BagSpec, write_bag
-from visibility_builder.synthesis.grid import exploration_poses
+from vbn_worlds.errors import WorldsError
+from vbn_worlds.synthesis.bags import START_NS, BagSpec, write_bag
+from vbn_worlds.synthesis.grid import exploration_poses
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
@@ -173,9 +173,9 @@ def test_fisheye_exploration_carries_its_lens_to_the_builder(tmp_path, room):
 
 def test_bad_input_is_one_line_errors(tmp_path, room, capsys):
     (tmp_path / 'exists').mkdir()
-    with pytest.raises(VisibilityBuilderError, match='exists'):
+    with pytest.raises(WorldsError, match='exists'):
         write_bag(room, BagSpec(), tmp_path / 'exists')
-    with pytest.raises(VisibilityBuilderError, match='kind'):
+    with pytest.raises(WorldsError, match='kind'):
         write_bag(room, BagSpec(kind='walk'), tmp_path / 'x')
     bad = tmp_path / 'bad.json'
     bad.write_text('{"perimeter": [[0, 0], [1, 0]]}')
@@ -230,7 +230,7 @@ def test_a_tilted_mount_is_written_to_tf_static_and_read_back(tmp_path, room):
     # The heading of the pitched optical axis is still the base's.
     assert exploration.camera_poses()[:, 2] == pytest.approx(exploration.base_poses()[:, 2],
                                                              abs=1e-9)
-    with pytest.raises(VisibilityBuilderError, match='pitch must be within 45'):
+    with pytest.raises(WorldsError, match='pitch must be within 45'):
         BagSpec(camera_pitch_deg=60.0).check()
 
 
@@ -252,5 +252,5 @@ def test_vibration_tilts_each_frame_and_the_ground_truth_says_by_how_much(tmp_pa
     # The planar pose is untouched: the heading is the base's yaw.
     assert exploration.camera_poses()[:, 2] == pytest.approx(
         exploration.base_poses()[:, 2], abs=0.05)
-    with pytest.raises(VisibilityBuilderError, match='vibration must be 0 to 5 degrees'):
+    with pytest.raises(WorldsError, match='vibration must be 0 to 5 degrees'):
         BagSpec(vibration_deg=-1.0).check()

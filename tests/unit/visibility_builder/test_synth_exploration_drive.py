@@ -9,12 +9,12 @@ import pytest
 from landmark_db.scene import Scene
 from landmark_db.scenes import resolve_scene
 from vbn_common.geometry.frames import compose_poses, wrap_angle
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.synthesis.bags import BagSpec, write_bag
-from visibility_builder.synthesis.exploration_drive import driven_exploration, visiting_order
-from visibility_builder.synthesis.grid import exploration_poses
-from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
-from visibility_builder.synthesis.trajectory import RunParameters
+from vbn_worlds.errors import WorldsError
+from vbn_worlds.synthesis.bags import BagSpec, write_bag
+from vbn_worlds.synthesis.exploration_drive import driven_exploration, visiting_order
+from vbn_worlds.synthesis.grid import exploration_poses
+from vbn_worlds.synthesis.odometry import OdometryNoise, simulate_odometry
+from vbn_worlds.synthesis.trajectory import RunParameters
 
 
 @pytest.fixture(scope='module')
@@ -105,7 +105,7 @@ def test_noise_free_odometry_reproduces_the_ground_truth(room) -> None:
 
 
 def test_driven_exploration_bag(tmp_path, room) -> None:
-    from landmark_localizer.bench.pose_bags import read_run_bag
+    from vbn_bench.localization.pose_bags import read_run_bag
 
     spec = BagSpec(kind='exploration', camera='panoramic', width=128, height=32,
                    spacing=1.0, odometry=True, drift=3.0, seed=2)
@@ -136,9 +136,9 @@ def test_driven_exploration_bag(tmp_path, room) -> None:
 
 
 def test_bad_driven_specs_are_refused(tmp_path, room) -> None:
-    with pytest.raises(VisibilityBuilderError, match='odometry is for explorations'):
+    with pytest.raises(WorldsError, match='odometry is for explorations'):
         write_bag(room, BagSpec(kind='run', odometry=True), tmp_path / 'a')
-    with pytest.raises(VisibilityBuilderError, match='drift must be'):
+    with pytest.raises(WorldsError, match='drift must be'):
         write_bag(room, BagSpec(kind='exploration', odometry=True, drift=-1.0),
                   tmp_path / 'b')
     assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()

@@ -6,8 +6,8 @@ import pytest
 
 from landmark_db.scenes import resolve_scene
 from vbn_common.geometry.frames import compose_poses, wrap_angle
-from visibility_builder.synthesis.odometry import OdometryNoise, simulate_odometry
-from visibility_builder.synthesis.trajectory import kidnapped_trajectory, run_trajectory
+from vbn_worlds.synthesis.odometry import OdometryNoise, simulate_odometry
+from vbn_worlds.synthesis.trajectory import kidnapped_trajectory, run_trajectory
 
 
 @pytest.fixture(scope='module')
@@ -85,11 +85,11 @@ def test_a_slipping_wheel_runs_ahead_by_a_fifth_of_the_path_in_its_window(run):
 
 
 def test_run_rates_and_faults_are_checked():
-    from visibility_builder.errors import VisibilityBuilderError
-    from visibility_builder.synthesis.bags import BagSpec
+    from vbn_worlds.errors import WorldsError
+    from vbn_worlds.synthesis.bags import BagSpec
 
     BagSpec(kind='run', rate_hz=2.0, slip_bursts=3, odom_dropouts=3).check()
     for bad in (dict(kind='run', rate_hz=3.0), dict(kind='run', rate_hz=100.0),
                 dict(kind='exploration', slip_bursts=1), dict(kind='run', odom_dropouts=-1)):
-        with pytest.raises(VisibilityBuilderError):
+        with pytest.raises(WorldsError):
             BagSpec(**bad).check()

@@ -8,9 +8,9 @@ import pytest
 
 from landmark_db.scene import Scene
 from landmark_db.scenes import resolve_scene
-from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.synthesis.grid import exploration_poses
-from visibility_builder.synthesis.trajectory import (
+from vbn_worlds.errors import WorldsError
+from vbn_worlds.synthesis.grid import exploration_poses
+from vbn_worlds.synthesis.trajectory import (
     RunParameters,
     kidnapped_trajectory,
     run_trajectory,
@@ -59,11 +59,11 @@ def test_wall_distance_hand_checked():
 
 
 def test_bad_spacing_is_refused(room):
-    with pytest.raises(VisibilityBuilderError):
+    with pytest.raises(WorldsError):
         exploration_poses(room, 0.0)
-    with pytest.raises(VisibilityBuilderError):
+    with pytest.raises(WorldsError):
         exploration_poses(room, float('nan'))
-    with pytest.raises(VisibilityBuilderError):
+    with pytest.raises(WorldsError):
         exploration_poses(SQUARE, 0.5, clearance=0.6)
 
 

@@ -1,8 +1,8 @@
 """landmark_db: world instances, region decomposition and the landmark database.
 
-The core of this package imports numpy, scipy and matplotlib only (never rclpy):
-the world model of Chapter 3, the rho-MORDP algorithms of Chapters 4 and 5, the
-simulator of Chapter 8 and the stored database.
+The world model of Chapter 3 (world instances and polygon scenes, with the shipped
+``room`` and ``floor``), the rho-MORDP algorithms of Chapters 4 and 5 and the stored
+database. Stands on ``vbn_common``; imports numpy and scipy, never rclpy.
 """
 from __future__ import annotations
 

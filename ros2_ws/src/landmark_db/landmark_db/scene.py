@@ -36,7 +36,7 @@ import numpy as np
 
 from landmark_db.errors import LandmarkDbError
 from landmark_db.geometry2d import nearest_segment_distance
-from landmark_db.jsonio import read_json_file, write_json_atomic
+from vbn_common.jsonio import read_json_file, write_json_atomic
 
 __all__ = ['Scene', 'SceneFeatures', 'load_scene', 'points_in_polygon', 'save_scene']
 
@@ -199,7 +199,7 @@ def load_scene(path: str | Path) -> Scene:
         LandmarkDbError: if the file is missing, unreadable, not valid JSON or not a
             valid scene.
     """
-    return read_json_file(path, Scene.from_dict)
+    return read_json_file(path, Scene.from_dict, LandmarkDbError)
 
 
 def save_scene(scene: Scene, path: str | Path) -> None:
@@ -232,8 +232,8 @@ def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 def _polygon(raw: Any, name: str) -> np.ndarray:
     try:
         polygon = np.asarray(raw, dtype=float)
-    except (TypeError, ValueError):
-        raise LandmarkDbError(f'{name} must be a list of [x, y] points') from None
+    except (TypeError, ValueError) as error:
+        raise LandmarkDbError(f'{name} must be a list of [x, y] points') from error
     if polygon.ndim != 2 or polygon.shape[1] != 2 or polygon.shape[0] < 3:
         raise LandmarkDbError(f'{name} must be a list of at least 3 [x, y] points')
     if not np.all(np.isfinite(polygon)):
@@ -272,9 +272,9 @@ def _features(raw: Any) -> SceneFeatures:
         extent = np.asarray(columns['angular_extent_deg'], dtype=float)
         rmin = np.asarray(columns['range_min'], dtype=float)
         rmax = np.asarray(columns['range_max'], dtype=float)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError) as error:
         raise LandmarkDbError('features must hold numbers: position and normal as [x, y]'
-                              ) from None
+                              ) from error
     for name, values in (('position', positions), ('normal', normals),
                          ('angular_extent_deg', extent), ('range_min', rmin),
                          ('range_max', rmax)):

@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from landmark_db.errors import LandmarkDbError
-from landmark_db.jsonio import read_json_file, write_json_atomic
+from vbn_common.jsonio import read_json_file, write_json_atomic
 
 __all__ = [
     'WorldInstance',
@@ -338,7 +338,7 @@ def load_world(path: str | Path) -> WorldInstance:
     Raises:
         LandmarkDbError: if the file is missing, not valid JSON or not a valid world.
     """
-    return read_json_file(path, world_from_dict)
+    return read_json_file(path, world_from_dict, LandmarkDbError)
 
 
 def save_world(world: WorldInstance, path: str | Path) -> None:
@@ -356,8 +356,8 @@ def _check_poses(raw: Any) -> np.ndarray:
             return np.zeros((0, 2), dtype=float)
         try:
             arr = np.asarray(raw)
-        except (TypeError, ValueError):
-            raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers") from None
+        except (TypeError, ValueError) as error:
+            raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers") from error
         if arr.dtype.kind not in 'iuf':
             raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers")
     if arr.size == 0:
@@ -367,8 +367,8 @@ def _check_poses(raw: Any) -> np.ndarray:
                               'points')
     try:
         arr = arr.astype(float)
-    except (TypeError, ValueError):
-        raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers") from None
+    except (TypeError, ValueError) as error:
+        raise LandmarkDbError("world 'poses' must be a list of [x, y] numbers") from error
     bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
     if bad.size:
         raise LandmarkDbError(f'pose {int(bad[0])} has non-finite coordinates')
@@ -392,8 +392,8 @@ def _check_edges(raw: Any, n: int) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.int64)
     try:
         arr = np.asarray(raw)
-    except ValueError:
-        raise LandmarkDbError("world 'edges' must be a list of [i, j] index pairs") from None
+    except ValueError as error:
+        raise LandmarkDbError("world 'edges' must be a list of [i, j] index pairs") from error
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise LandmarkDbError("world 'edges' must be a list of [i, j] index pairs")
     if arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer):
@@ -420,8 +420,8 @@ def _check_ids(raw: Any, name: str) -> np.ndarray:
         raise LandmarkDbError(f'{name}: feature ids must be integers, got {bad!r}')
     try:
         arr = np.asarray(raw, dtype=np.int64)
-    except (OverflowError, ValueError, TypeError):
-        raise LandmarkDbError(f'{name}: feature ids must be 64-bit integers') from None
+    except (OverflowError, ValueError, TypeError) as error:
+        raise LandmarkDbError(f'{name}: feature ids must be 64-bit integers') from error
     if arr.ndim != 1:
         raise LandmarkDbError(f'{name}: feature ids must be a flat list')
     if np.any(arr < 0):

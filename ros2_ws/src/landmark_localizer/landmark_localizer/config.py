@@ -229,4 +229,4 @@ class LocalizerConfig:
         try:
             return replace(self, **values)
         except TypeError as error:
-            raise LocalizerError(f'bad localizer setting: {error}') from None
+            raise LocalizerError(f'bad localizer setting: {error}') from error

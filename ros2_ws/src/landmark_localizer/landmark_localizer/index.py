@@ -125,7 +125,7 @@ class DatabaseIndex:
                 camera_from_info(_CameraInfo(database.info.camera)),
                 database.info.parameters.get('camera_tilt'))
         except VbnCommonError as error:
-            raise LocalizerError(f'database camera: {error}') from None
+            raise LocalizerError(f'database camera: {error}') from error
         # The camera of the frames being localized: the database's, or the run's own
         # (another resolution or calibration; camera_check.frame_camera).
         self.frame_camera: CameraModel = self.camera

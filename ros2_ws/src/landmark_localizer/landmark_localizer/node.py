@@ -84,7 +84,6 @@ from tf2_msgs.msg import TFMessage
 from visualization_msgs.msg import MarkerArray
 
 from landmark_db.database import LandmarkDatabase, open_database
-from landmark_db.errors import VbnError
 from landmark_localizer import conversions
 from landmark_localizer.config import LocalizerConfig
 from landmark_localizer.errors import LocalizerError
@@ -102,6 +101,7 @@ from landmark_localizer.parameters import (
     unknown_parameters,
 )
 from vbn_common import names
+from vbn_common.errors import VbnError
 from vbn_common.geometry.transforms import StampedTransform
 from vbn_common.names import relative
 from vbn_common.ros_tools.markers import LATCHED_QOS, region_markers
@@ -195,7 +195,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
                     description=spec.description, read_only=spec.read_only))
             except ParameterException as error:
                 raise LocalizerError(f'parameter {spec.name}: {error}'.splitlines()[0]) \
-                    from None
+                    from error
         # rclpy keeps this node's -p and --params-file values here; an undeclared one
         # would otherwise be ignored without a word.
         given = getattr(self, '_parameter_overrides', {})

@@ -57,7 +57,7 @@ from typing import Any
 import numpy as np
 
 from vbn_common.bags import open_bag
-from vbn_common.errors import VbnCommonError
+from vbn_common.errors import NoPoseSourceError, VbnCommonError
 from vbn_common.geometry.camera import CameraModel, camera_from_info
 from vbn_common.geometry.mount import level_frames, level_tilt, tilt_angles, tilted
 from vbn_common.images import EncodedImage, ImageDecodeError, check_image
@@ -357,7 +357,7 @@ def _pose_source(path: Path, counts: dict[str, int], config: ReadConfig) -> str:
     if config.pose_source == 'estimated' and not has_estimate:
         raise VbnCommonError(f'bag {path} has no {ESTIMATED_POSE} (vbn estimate-poses)')
     if config.pose_source == 'tf' and not has_tf:
-        raise VbnCommonError(f'bag {path} has no pose source: no messages on {_TF}')
+        raise NoPoseSourceError(f'bag {path} has no pose source: no messages on {_TF}')
     if config.pose_source != 'auto':
         return config.pose_source
     if has_truth:
@@ -366,7 +366,7 @@ def _pose_source(path: Path, counts: dict[str, int], config: ReadConfig) -> str:
         return 'estimated'
     if has_tf:
         return 'tf'
-    raise VbnCommonError(
+    raise NoPoseSourceError(
         f'bag {path} has no pose source: no messages on {config.pose_topic} or {_TF}')
 
 
@@ -469,7 +469,7 @@ def _assemble(path: Path, data: _BagData, image_topic: str, source: str, config:
     else:
         looked_up = data.tf.lookup(config.map_frame, config.base_frame, stamps, tolerance_ns)
         if looked_up is None:
-            raise VbnCommonError(
+            raise NoPoseSourceError(
                 f'bag {path} has no pose source: no {config.pose_topic} and no transform '
                 f'chain {config.map_frame} -> {config.base_frame} in /tf and /tf_static')
         base_r, base_t, found = looked_up
@@ -585,7 +585,7 @@ def _ground_truth(path: Path, data: _BagData, stamps: np.ndarray, tolerance_ns: 
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return ``(R, t, found)`` of the base at each image stamp from the ground truth."""
     if not data.pose_stamps:
-        raise VbnCommonError(
+        raise NoPoseSourceError(
             f'bag {path} has no pose source: no readable message on {config.pose_topic}')
     other = {f: c for f, c in data.pose_frames.items() if f not in ('', config.map_frame)}
     if other:

@@ -20,10 +20,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from landmark_db.workers import available_cores, map_in_processes
 from vbn_common.allocator import reuse_freed_memory
 from vbn_common.errors import VbnCommonError
 from vbn_common.images import EncodedImage, decode_image, exposed
+from vbn_common.workers import available_cores, map_in_processes
 
 __all__ = ['ImageFeatures', 'SiftConfig', 'extract_features', 'extract_features_scaled',
            'extract_many']

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import sys
 from typing import Any
 
-from landmark_db.errors import VbnError
+from vbn_common.errors import VbnError
 from vbn_common.ros_environment import check_ros_environment
 
 __all__ = ['run_node']
@@ -26,7 +26,7 @@ def run_node(name: str, make_node: Callable[[], Any], args: list[str] | None = N
     Args:
         name: The executable's name, for ``NAME: error: ...`` on stderr.
         make_node: Creates the node (after ``rclpy.init``); a
-            :class:`~landmark_db.errors.VbnError` it raises is a start-up error.
+            :class:`~vbn_common.errors.VbnError` it raises is a start-up error.
         args: Command-line arguments for ``rclpy.init`` (None: ``sys.argv``).
         threads: Executor threads (1: a single-threaded executor).
         start: Called with the node once it is added to the executor.

@@ -36,7 +36,6 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from landmark_db.atomic import check_output_folder
 from landmark_db.database import (
     BuildInfo,
     CameraIntrinsics,
@@ -49,9 +48,9 @@ from landmark_db.database import (
 from landmark_db.database.build_info import utc_now_iso
 from landmark_db.database.compact import compact_database
 from landmark_db.decomposition import Decomposition, decompose, service
-from landmark_db.errors import LandmarkDbError
 from landmark_db.world import WorldInstance
-from vbn_common.errors import VbnCommonError
+from vbn_common.atomic import check_output_folder
+from vbn_common.errors import NoPoseSourceError
 from vbn_common.exploration import Exploration, read_exploration
 from vbn_common.features import ImageFeatures, extract_many
 from vbn_common.geometry.camera import camera_from_info
@@ -212,8 +211,8 @@ def build(bag: str | os.PathLike[str], config: BuildConfig = BuildConfig(),
     stages.begin('read', str(bag))
     try:
         exploration = read_exploration(bag, config.read)
-    except VbnCommonError as error:
-        if config.read.pose_source != 'auto' or 'no pose source' not in str(error):
+    except NoPoseSourceError as error:
+        if config.read.pose_source != 'auto':
             raise
         from visibility_builder.estimation.pipeline import estimate_from_odometry
 
@@ -322,11 +321,8 @@ def build_from_exploration(exploration: Exploration, config: BuildConfig = Build
         raise VisibilityBuilderError(
             f"k={dc.k} is larger than any pose's visibility (at most "
             f'{int(per_pose.max(initial=0))} filtered features per pose): lower --k')
-    try:
-        decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed,
-                                  check_stop=check_stop)
-    except LandmarkDbError as error:
-        raise VisibilityBuilderError(str(error)) from None
+    decomposition = decompose(world, dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed,
+                              check_stop=check_stop)
     served = service(world, [region.poses for region in decomposition.regions], dc.k, dc.rho)
     bound = {} if decomposition.lower_bound is None else {
         'lower_bound': decomposition.lower_bound,
@@ -369,10 +365,7 @@ def _check_output(path: Path) -> None:
     """Fail before any work when the database could not be written."""
     if path.is_dir():
         raise VisibilityBuilderError(f'--db {path} is a folder, not a file')
-    try:
-        check_output_folder(path)
-    except LandmarkDbError as error:
-        raise VisibilityBuilderError(str(error)) from None
+    check_output_folder(path)
 
 
 def _assemble(exploration: Exploration, sampling: PoseSampling,

@@ -15,10 +15,10 @@ import numpy as np
 from landmark_db.database.codebook import CODE_SIZES
 from landmark_db.database.fields import DESCRIPTOR_SIZE
 from landmark_db.decomposition import ALGORITHMS
-from landmark_db.workers import available_cores
 from vbn_common.exploration import ReadConfig
 from vbn_common.features import SiftConfig
 from vbn_common.parameters import attribute_docs
+from vbn_common.workers import available_cores
 from visibility_builder.classes import ClassConfig
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.filters import FilterConfig
@@ -152,7 +152,7 @@ def config_from_flat(values: dict[str, Any], base: BuildConfig | None = None) ->
         changed = {s: replace(getattr(base, s), **v) for s, v in sections.items() if v}
         return replace(base, **changed, **top)
     except TypeError as error:
-        raise VisibilityBuilderError(f'bad build setting: {error}') from None
+        raise VisibilityBuilderError(f'bad build setting: {error}') from error
 
 
 def setting_descriptions(config: BuildConfig | None = None) -> dict[str, str]:

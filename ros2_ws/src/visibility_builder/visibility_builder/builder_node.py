@@ -42,9 +42,9 @@ from rclpy.node import Node
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import MarkerArray
 
-from landmark_db.errors import VbnError
 from vbn_common import names
 from vbn_common.bags import BagWriter
+from vbn_common.errors import VbnError
 from vbn_common.names import relative
 from vbn_common.parameters import unknown_parameters
 from vbn_common.ros_tools.markers import LATCHED_QOS, region_markers
@@ -128,7 +128,7 @@ class BuilderNode(Node):
                     description=text, dynamic_typing=dynamic, read_only=name in READ_ONLY))
             except ParameterException as error:
                 raise VisibilityBuilderError(
-                    f'parameter {name}: {error}'.splitlines()[0]) from None
+                    f'parameter {name}: {error}'.splitlines()[0]) from error
         unknown = unknown_parameters(set(getattr(self, '_parameter_overrides', {})),
                                      set(declared))
         if unknown:

@@ -110,8 +110,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from landmark_db.workers import map_in_processes
 from vbn_common.blas import single_threaded_blas
+from vbn_common.workers import map_in_processes
 from visibility_builder.errors import VisibilityBuilderError
 from visibility_builder.pair_matching import (
     chunk_by_first_pose,

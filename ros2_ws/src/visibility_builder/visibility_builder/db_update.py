@@ -63,11 +63,11 @@ from landmark_db.database.codebook import DescriptorCodebook
 from landmark_db.database.compact import compact_database
 from landmark_db.decomposition import service
 from landmark_db.errors import LandmarkDbError
-from landmark_db.workers import available_cores
 from vbn_common.errors import VbnCommonError
 from vbn_common.exploration import Exploration, read_exploration
 from vbn_common.features import ImageFeatures, SiftConfig, extract_many
 from vbn_common.geometry.frames import world_points_to_camera
+from vbn_common.workers import available_cores
 from visibility_builder.build import BuildConfig, config_from_flat
 from visibility_builder.build_config import TOP_SETTINGS
 from visibility_builder.errors import VisibilityBuilderError
@@ -323,7 +323,7 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
     try:
         exploration = read_exploration(bag, build_config.read)
     except VbnCommonError as error:
-        raise VisibilityBuilderError(f'update bag {bag}: {error}') from None
+        raise VisibilityBuilderError(f'update bag {bag}: {error}') from error
     _check_camera(database, exploration, bag)
     frames = exploration.frames
     base = np.array([f.base_pose for f in frames], float)
@@ -445,7 +445,7 @@ def update_database(database: LandmarkDatabase, bag: str | os.PathLike[str],
             np.random.default_rng(build_config.decomposition.seed), database.codebook)
     except LandmarkDbError as error:
         raise VisibilityBuilderError(f'the updated database is not consistent: {error}'
-                                     ) from None
+                                     ) from error
     counts = {'images': len(frames), 'images_used': len(features),
               'images_elsewhere': int(len(frames) - used.size),
               'undecodable': int(used.size - len(features)),

@@ -1,7 +1,7 @@
 """Errors of the visibility_builder package."""
 from __future__ import annotations
 
-from landmark_db.errors import VbnError
+from vbn_common.errors import VbnError
 
 __all__ = ['VisibilityBuilderError']
 

@@ -21,8 +21,8 @@ def write_report(folder: Path, result: Any, scene_name: str | None) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from landmark_db.atomic import write_text_atomic
-    from landmark_db.plotting import save_decomposition_figure
+    from vbn_common.atomic import write_text_atomic
+    from visibility_builder.plotting import save_decomposition_figure
 
     folder.mkdir(exist_ok=True)
     scene = None

@@ -106,7 +106,7 @@ def new_regions(database: LandmarkDatabase, visibility: sp.csr_matrix,
                                       dc.algorithm, dc.k, dc.rho, dc.sigma, rng=dc.seed)
         except LandmarkDbError as error:
             raise VisibilityBuilderError(f'the updated world cannot be decomposed: {error}'
-                                         ) from None
+                                         ) from error
         regions, found = _regions_with_views(decomposition, database, visibility, blocked,
                                              needed, config, table)
         if found is None:

@@ -32,7 +32,7 @@ member. Complexity: O(sum of m^2) for classes of m members (in practice m <= 100
 This step is not in the thesis, which checks correspondences by descriptors only
 and reports one wrongly classified feature in 897 classes after a visual check
 (Section 6.2.1). It is a departure with a reason: purity measured against the
-renderer's ground truth (:mod:`visibility_builder.purity`).
+renderer's ground truth (:mod:`vbn_bench.purity`).
 
 Reference: thesis Sections 6.1 and 6.2.1; Schoenberger and Frahm, Structure-from-Motion
 Revisited (CVPR 2016), for track filtering by reprojection error.

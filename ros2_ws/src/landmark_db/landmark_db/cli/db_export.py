@@ -26,11 +26,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Open the database and write the requested files."""
-    from landmark_db.atomic import check_output_folder
     from landmark_db.database import open_database
     from landmark_db.decomposition import save_decomposition
     from landmark_db.errors import LandmarkDbError
     from landmark_db.world import save_world
+    from vbn_common.atomic import check_output_folder
 
     if not args.world and not args.decomposition:
         raise LandmarkDbError('nothing to export: give --world and/or --decomposition')

@@ -66,10 +66,10 @@ def run(args: argparse.Namespace) -> int:
     """Load the world, decompose it and write the decomposition."""
     import math
 
-    from landmark_db.atomic import check_output_folder
     from landmark_db.decomposition import certify, decompose, save_decomposition, service
     from landmark_db.errors import LandmarkDbError
     from landmark_db.world import load_world
+    from vbn_common.atomic import check_output_folder
 
     if args.k < 1:
         raise LandmarkDbError(f'--k must be at least 1, got {args.k}')

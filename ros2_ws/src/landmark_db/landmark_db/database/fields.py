@@ -96,8 +96,8 @@ def check_utc(value: Any) -> None:
     check_str(value, 'created_utc', nonempty=True)
     try:
         moment = datetime.fromisoformat(value)
-    except ValueError:
-        raise LandmarkDbError(f'created_utc must be an ISO 8601 time, got {value!r}') from None
+    except ValueError as error:
+        raise LandmarkDbError(f'created_utc must be an ISO 8601 time, got {value!r}') from error
     if moment.tzinfo is not None and moment.utcoffset() != timedelta(0):
         raise LandmarkDbError(f'created_utc must be in UTC, got {value!r}')
 
@@ -116,7 +116,7 @@ def json_dict(value: Any, name: str) -> dict[str, Any]:
     try:
         text = json.dumps(value, default=json_default, allow_nan=False, sort_keys=True)
     except (TypeError, ValueError) as error:
-        raise LandmarkDbError(f'{name} must be JSON-serialisable: {error}') from None
+        raise LandmarkDbError(f'{name} must be JSON-serialisable: {error}') from error
     return json.loads(text)
 
 
@@ -133,8 +133,8 @@ def _shape_text(expected: tuple[int | None, ...]) -> str:
 def _numeric(value: Any, name: str) -> np.ndarray:
     try:
         array = np.asarray(value)
-    except (TypeError, ValueError):
-        raise LandmarkDbError(f'{name} must be a _numeric array') from None
+    except (TypeError, ValueError) as error:
+        raise LandmarkDbError(f'{name} must be a _numeric array') from error
     if array.size and (array.dtype == bool or array.dtype.kind not in 'iuf'):
         raise LandmarkDbError(f'{name} must be a _numeric array, got dtype {array.dtype}')
     return array

@@ -3,7 +3,7 @@
 Writing never leaves a half-written file and never touches the previous database: the
 whole database is built in ONE transaction in an in-memory SQLite database, its image
 (``Connection.serialize``) is written to a hidden temporary sibling of the target by
-:func:`landmark_db.atomic.atomic_output`, fsynced and renamed into place, and the
+:func:`vbn_common.atomic.atomic_output`, fsynced and renamed into place, and the
 folder is fsynced. A crash or ``kill -9`` while the tables are filled (nearly all of a
 write) leaves nothing on disk; only one during the final copy of the finished image
 (a fraction of a second) can leave a hidden ``.NAME.*.tmp`` file beside the untouched
@@ -34,7 +34,6 @@ from typing import Any
 
 import numpy as np
 
-from landmark_db.atomic import atomic_output
 from landmark_db.database.build_info import BuildInfo
 from landmark_db.database.model import (
     LandmarkDatabase,
@@ -63,6 +62,7 @@ from landmark_db.database.tables_sql import (
     load_regions,
 )
 from landmark_db.errors import LandmarkDbError
+from vbn_common.atomic import atomic_output
 
 __all__ = ['DatabaseSummary', 'database_image', 'database_summary', 'open_database',
            'write_database']
@@ -122,7 +122,7 @@ def database_image(db: LandmarkDatabase) -> bytes:
         connection.execute('COMMIT')
         return connection.serialize()
     except sqlite3.Error as error:
-        raise LandmarkDbError(f'cannot build the database: {error}') from None
+        raise LandmarkDbError(f'cannot build the database: {error}') from error
     finally:
         connection.close()
 
@@ -191,7 +191,7 @@ def open_database(path: str | Path) -> LandmarkDatabase:
             db, stored_adjacency = _load(connection)
         except (LandmarkDbError, *_DAMAGE) as error:
             raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
-                from None
+                from error
     if digest != db.content_digest():
         raise LandmarkDbError(f'{path}: damaged database: its contents do not match their '
                               f'checksum (content_digest)')
@@ -279,7 +279,7 @@ def database_summary(path: str | Path) -> DatabaseSummary:
             version = int(connection.execute('PRAGMA user_version').fetchone()[0])
         except _DAMAGE as error:
             raise LandmarkDbError(f'{path}: damaged database: {_shorten(str(error))}') \
-                from None
+                from error
     return DatabaseSummary(str(path), Path(path).stat().st_size, version, counts,
                            table_bytes, build)
 
@@ -304,12 +304,12 @@ def _checked_connection(path: str | Path) -> Iterator[sqlite3.Connection]:
         with open(target, 'rb') as stream:
             header = stream.read(100)
             size = os.fstat(stream.fileno()).st_size
-    except FileNotFoundError:
-        raise LandmarkDbError(f'{path}: no such file') from None
-    except IsADirectoryError:
-        raise LandmarkDbError(f'{path}: is a folder, not a landmark database') from None
+    except FileNotFoundError as error:
+        raise LandmarkDbError(f'{path}: no such file') from error
+    except IsADirectoryError as error:
+        raise LandmarkDbError(f'{path}: is a folder, not a landmark database') from error
     except OSError as error:
-        raise LandmarkDbError(f'{path}: cannot read ({error.strerror})') from None
+        raise LandmarkDbError(f'{path}: cannot read ({error.strerror})') from error
     if not header:
         raise LandmarkDbError(f'{path}: empty file, not a landmark database')
     if not header.startswith(_SQLITE_MAGIC):
@@ -324,7 +324,7 @@ def _checked_connection(path: str | Path) -> Iterator[sqlite3.Connection]:
     try:
         connection = sqlite3.connect(uri, uri=True)
     except sqlite3.Error as error:
-        raise LandmarkDbError(f'{path}: cannot open ({error})') from None
+        raise LandmarkDbError(f'{path}: cannot open ({error})') from error
     try:
         _check_file(connection, path)
         yield connection
@@ -385,7 +385,7 @@ def _check_file(connection: sqlite3.Connection, path: str | Path) -> None:
                 f'user_version {version}')
     except _DAMAGE as error:
         raise LandmarkDbError(
-            f'{path}: damaged or not a SQLite database ({_shorten(str(error))})') from None
+            f'{path}: damaged or not a SQLite database ({_shorten(str(error))})') from error
 
 
 def _shorten(text: str, limit: int = 160) -> str:

@@ -73,7 +73,7 @@ from landmark_db.decomposition.set_cover import (
 from landmark_db.decomposition.shrink_regions import shrink_regions
 from landmark_db.defaults import DECOMPOSITION
 from landmark_db.errors import LandmarkDbError
-from landmark_db.workers import available_cores, map_in_processes
+from vbn_common.workers import available_cores, map_in_processes
 
 __all__ = ['best_cover']
 

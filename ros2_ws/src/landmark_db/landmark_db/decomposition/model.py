@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from landmark_db.errors import LandmarkDbError
-from landmark_db.jsonio import read_json_file, write_json_atomic
+from vbn_common.jsonio import read_json_file, write_json_atomic
 
 __all__ = ['Decomposition', 'Region', 'load_decomposition', 'save_decomposition']
 
@@ -141,7 +141,7 @@ def load_decomposition(path: str | Path) -> Decomposition:
     Raises:
         LandmarkDbError: if the file is missing, not JSON, or malformed.
     """
-    return read_json_file(path, Decomposition.from_dict)
+    return read_json_file(path, Decomposition.from_dict, LandmarkDbError)
 
 
 def save_decomposition(decomposition: Decomposition, path: str | Path) -> None:

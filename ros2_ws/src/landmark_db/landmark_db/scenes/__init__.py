@@ -48,6 +48,6 @@ def _load(path: Path) -> Scene:
     try:
         return load_scene(path)
     except LandmarkDbError as error:
-        raise LandmarkDbError(f'invalid scene: {error}') from None
+        raise LandmarkDbError(f'invalid scene: {error}') from error
     except (OSError, UnicodeDecodeError) as error:
-        raise LandmarkDbError(f'cannot read scene {path}: {error}') from None
+        raise LandmarkDbError(f'cannot read scene {path}: {error}') from error

@@ -49,7 +49,7 @@ def default_qos(
         rel = QosReliability[reliability.upper()]
         dur = QosDurability[durability.upper()]
     except KeyError as error:
-        raise VbnCommonError(f'unknown QoS setting {error}') from None
+        raise VbnCommonError(f'unknown QoS setting {error}') from error
     infinite = QosTime(0x7FFFFFFF, 0xFFFFFFFF)  # rmw's "infinite" as rosbag2 stores it
     return Qos(QosHistory.KEEP_LAST, depth, rel, dur, infinite, infinite,
                QosLiveliness.AUTOMATIC, infinite, False)
@@ -73,7 +73,7 @@ def parse_qos_profiles(profiles: str | Sequence[Qos | dict[str, Any]] | None) ->
         try:
             return parse_qos(profiles)
         except (ReaderError, KeyError, TypeError) as error:
-            raise VbnCommonError(f'invalid offered QoS profiles: {error}') from None
+            raise VbnCommonError(f'invalid offered QoS profiles: {error}') from error
     out: list[Qos] = []
     for item in profiles:
         if isinstance(item, Qos):
@@ -82,7 +82,7 @@ def parse_qos_profiles(profiles: str | Sequence[Qos | dict[str, Any]] | None) ->
             try:
                 out.extend(parse_qos([item]))  # type: ignore[list-item]
             except (ReaderError, KeyError, TypeError) as error:
-                raise VbnCommonError(f'invalid offered QoS profile: {error}') from None
+                raise VbnCommonError(f'invalid offered QoS profile: {error}') from error
     return out
 
 

@@ -151,7 +151,7 @@ class BagReader:
             files = [path / Path(name).name for name in info['relative_file_paths']]
         except Exception as error:  # noqa: BLE001 - malformed YAML fails in many ways
             raise VbnCommonError(
-                f'{path}/metadata.yaml is not rosbag2 metadata: {first_line(error)}') from None
+                f'{path}/metadata.yaml is not rosbag2 metadata: {first_line(error)}') from error
         if storage != 'mcap':
             raise VbnCommonError(
                 f'bag {path} uses storage {storage!r}; only mcap bags are supported')
@@ -362,7 +362,7 @@ class BagReader:
         except Exception as error:  # noqa: BLE001 - parser errors of many kinds
             raise VbnCommonError(
                 f'cannot parse the definition of {msgtype!r} in bag {self.path}: '
-                f'{first_line(error)}') from None
+                f'{first_line(error)}') from error
         return self._typestore
 
     # -- lifecycle -----------------------------------------------------------------

@@ -66,7 +66,7 @@ def msgdef_hash(msgdef: str, msgtype: str) -> str:
         return store.hash_rihs01(msgtype)
     except Exception as error:  # noqa: BLE001 - parser errors of many kinds
         raise VbnCommonError(
-            f'cannot parse the definition of {msgtype!r}: {first_line(error)}') from None
+            f'cannot parse the definition of {msgtype!r}: {first_line(error)}') from error
 
 
 def serialize(message: object, msgtype: str, typestore: Any = None) -> bytes:
@@ -97,7 +97,7 @@ def serialize(message: object, msgtype: str, typestore: Any = None) -> bytes:
         data = bytes(store.serialize_cdr(message, msgtype))
     except Exception as error:  # noqa: BLE001 - rosbags raises many kinds here
         raise VbnCommonError(
-            f'cannot serialize {type(message).__name__} as {msgtype}: {error}') from None
+            f'cannot serialize {type(message).__name__} as {msgtype}: {error}') from error
     return data + bytes(-len(data) % 4)
 
 
@@ -124,4 +124,4 @@ def deserialize(rawdata: bytes | memoryview, msgtype: str, typestore: Any = None
         return store.deserialize_cdr(rawdata, msgtype)
     except Exception as error:  # noqa: BLE001 - corrupted data fails in many ways
         raise VbnCommonError(
-            f'cannot deserialize {len(rawdata)} bytes as {msgtype}: {error}') from None
+            f'cannot deserialize {len(rawdata)} bytes as {msgtype}: {error}') from error

@@ -16,7 +16,7 @@ version ROS 2 Jazzy writes.
 
 A finished bag appears atomically: the writer works in a hidden scratch sibling
 directory and, on a clean close, hands the finished bag to
-:func:`landmark_db.atomic.atomic_output`, which flushes it to disk and renames it
+:func:`vbn_common.atomic.atomic_output`, which flushes it to disk and renames it
 into place; the scratch directory is removed, also when the block raises. (The
 scratch directory exists because rosbags names the ``.mcap`` file after the bag
 directory: the bag must be written under its final name.) ``vbn record`` instead
@@ -37,8 +37,7 @@ from typing import Any
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 
-from landmark_db.atomic import atomic_output, check_output_folder
-from landmark_db.errors import LandmarkDbError
+from vbn_common.atomic import atomic_output, check_output_folder
 from vbn_common.bags.qos import parse_qos_profiles
 from vbn_common.bags.serialization import (
     TYPESTORE,
@@ -115,10 +114,7 @@ class BagWriter:
         """
         if self._writer is not None:
             raise VbnCommonError(f'bag {self.path} is already open')
-        try:
-            check_output_folder(self.path)  # never create missing parents: say which
-        except LandmarkDbError as error:
-            raise VbnCommonError(str(error)) from None
+        check_output_folder(self.path)  # never create missing parents: say which
         if self.atomic:
             self._scratch = Path(tempfile.mkdtemp(
                 prefix=f'.{self.path.name}.tmp-', dir=self.path.parent))
@@ -172,8 +168,6 @@ class BagWriter:
                 raise VbnCommonError(f'{self.path} exists already, not overwriting')
             with atomic_output(self.path, directory=True) as temporary:
                 (self._scratch / self.path.name).rename(temporary)
-        except LandmarkDbError as error:
-            raise VbnCommonError(str(error)) from None
         finally:
             self._remove_scratch()
 

@@ -98,12 +98,12 @@ def run(args: argparse.Namespace) -> int:
     from rclpy.utilities import get_rmw_implementation_identifier
 
     from vbn_common.dds_probe import ping
+    from vbn_common.graph_processes import graph_process_argv
     from vbn_common.ros_tools.session import rcl_errors_as_one_line
 
     suffix = f'_{os.getpid()}'
-    echo = subprocess.Popen(
-        [sys.executable, '-m', 'vbn_common.dds_probe_main', 'echo', '--suffix', suffix],
-        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    echo = subprocess.Popen(graph_process_argv('dds_probe', 'echo', '--suffix', suffix),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     text = f'hello from vbn doctor, nonce {uuid.uuid4().hex[:12]}'
     result = None
     failure = ''

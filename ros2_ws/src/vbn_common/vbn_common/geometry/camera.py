@@ -516,14 +516,14 @@ def camera_from_info(info: CameraInfoLike) -> CameraModel:
         width_raw, height_raw = info.width, info.height
         model, d_raw, k_raw = info.distortion_model, info.d, info.k
     except AttributeError as exc:
-        raise VbnCommonError(f'camera info lacks a CameraInfo field: {exc}') from None
+        raise VbnCommonError(f'camera info lacks a CameraInfo field: {exc}') from exc
     width, height = _image_size(width_raw, height_raw)
     try:
         k = np.asarray(k_raw, dtype=float).reshape(-1)
         d = np.asarray(d_raw, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError) as error:
         raise VbnCommonError(
-            f'camera info k and d must be numbers, got k={k_raw!r}, d={d_raw!r}') from None
+            f'camera info k and d must be numbers, got k={k_raw!r}, d={d_raw!r}') from error
     if k.size != 9 or not np.all(np.isfinite(k)):
         raise VbnCommonError(f'camera info k must hold 9 finite numbers, '
                              f'got {k.tolist()}')
@@ -575,9 +575,9 @@ def _image_size(width: Any, height: Any) -> tuple[int, int]:
     """Return ``(width, height)`` as ints (message fields may be numpy integers)."""
     try:
         size = int(width), int(height)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError) as error:
         raise VbnCommonError(f'image size must be integers, '
-                             f'got {width!r} x {height!r}') from None
+                             f'got {width!r} x {height!r}') from error
     if size != (width, height):
         raise VbnCommonError(f'image size must be integers, got {width!r} x {height!r}')
     return size

@@ -5,7 +5,7 @@ distances to the rays solves ``sum_i (I - d_i d_i^T) p = sum_i (I - d_i d_i^T) c
 (Hartley and Zisserman's mid-point method generalised to many views). The builder
 triangulates its scene points so (:mod:`visibility_builder.scene_points`,
 :mod:`visibility_builder.point_patches`) and the structure-based peer its tracks
-(:mod:`landmark_localizer.bench.peer_map`), many groups of rays at once.
+(:mod:`vbn_bench.localization.peer_map`), many groups of rays at once.
 """
 from __future__ import annotations
 

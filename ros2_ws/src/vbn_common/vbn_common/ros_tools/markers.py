@@ -15,6 +15,7 @@ import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from vbn_common.names import MAP_FRAME
+from vbn_common.palette import region_colours
 
 __all__ = ['LATCHED_QOS', 'region_markers']
 
@@ -30,7 +31,6 @@ def region_markers(database: Any, frame_id: str = MAP_FRAME, stamp: Any = None) 
     from std_msgs.msg import ColorRGBA
     from visualization_msgs.msg import Marker, MarkerArray
 
-    from landmark_db.plotting import region_colours
 
     xy = database.poses.xy
     spacing = database.poses.spacing or _nearest_spacing(xy)

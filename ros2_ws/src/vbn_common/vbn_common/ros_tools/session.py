@@ -40,7 +40,7 @@ def rcl_errors_as_one_line(doing: str) -> Iterator[None]:
     except rclpy_implementation.RCLError as error:
         detail = str(error).strip().splitlines()[0] if str(error).strip() else repr(error)
         detail = detail.split(', at /')[0]  # rcl appends the C source file and line
-        raise VbnCommonError(f'cannot {doing}: {detail}') from None
+        raise VbnCommonError(f'cannot {doing}: {detail}') from error
 
 
 @contextmanager

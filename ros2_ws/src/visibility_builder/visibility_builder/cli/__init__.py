@@ -1,1 +1,1 @@
-"""``vbn`` subcommands contributed by visibility_builder (see ``landmark_db.cli.main``)."""
+"""``vbn`` subcommands contributed by visibility_builder (see ``vbn_common.cli.main``)."""

@@ -54,7 +54,7 @@ def register(subparsers: Any) -> None:
 
 def parse_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Return the ``section.name -> value`` overrides given on the command line."""
-    from landmark_db.cli.assignments import parse_assignments
+    from vbn_common.cli.assignments import parse_assignments
 
     values = parse_assignments(args.settings)
     for name in ('k', 'rho', 'sigma', 'algorithm'):

@@ -42,18 +42,13 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Update; print what changed; return 0 on success."""
-    from landmark_db.atomic import check_output_folder
     from landmark_db.database import open_database, write_database
-    from landmark_db.errors import LandmarkDbError
+    from vbn_common.atomic import check_output_folder
     from visibility_builder.db_update import UpdateConfig, update_database
-    from visibility_builder.errors import VisibilityBuilderError
 
     out = Path(args.out or args.db)
-    try:
-        check_output_folder(out)
-        database = open_database(args.db)
-    except LandmarkDbError as error:
-        raise VisibilityBuilderError(str(error)) from None
+    check_output_folder(out)
+    database = open_database(args.db)
     result = update_database(database, args.bag, UpdateConfig(workers=args.workers),
                              on_stage=lambda s: print(f'[{s}]', file=sys.stderr, flush=True))
     write_database(out, result.database)

@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
                                                             map_frame='odom'))
     except VbnCommonError as error:
         raise VisibilityBuilderError(f'{args.bag}: no usable odometry to estimate from '
-                                     f'(odom -> base_link on /tf): {error}') from None
+                                     f'(odom -> base_link on /tf): {error}') from error
     truth = None
     try:
         truth_exploration = read_exploration(args.bag, ReadConfig(pose_source='ground_truth'))
@@ -105,10 +105,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             known = (int(args.known_distance[0]), int(args.known_distance[1]),
                      float(args.known_distance[2]))
-        except ValueError:
+        except ValueError as error:
             raise VisibilityBuilderError('--known-distance takes two image indices and a '
                                          f'distance in metres, got {args.known_distance}'
-                                         ) from None
+                                         ) from error
         check_known_distance(len(exploration.frames), *known)     # before the estimation
     settings = EstimationSettings(workers=args.workers,
                                   wheel_calibration=not args.no_wheel_calibration)

@@ -532,9 +532,9 @@ def estimate_from_odometry(bag: str | os.PathLike[str], read: ReadConfig,
     """
     try:
         odometry = read_exploration(bag, replace(read, pose_source='tf', map_frame='odom'))
-    except VbnCommonError:
+    except VbnCommonError as error:
         raise VisibilityBuilderError(f'{missing}; nor odometry (odom -> base_link on /tf) to '
-                                     'estimate them from') from None
+                                     'estimate them from') from error
     _LOG.warning('%s has no poses of its images: estimating them from the images and the '
                  'odometry (thesis 6.1; vbn estimate-poses writes them into a bag once)', bag)
     track = read_track(bag)

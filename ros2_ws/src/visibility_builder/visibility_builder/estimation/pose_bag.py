@@ -13,11 +13,10 @@ from pathlib import Path
 import numpy as np
 
 from vbn_common import names
-from vbn_common.bags import BagWriter, default_qos, open_bag
+from vbn_common.bags import BagWriter, default_qos, messages, open_bag
 from vbn_common.bags.serialization import TYPESTORE
 from vbn_common.geometry.frames import wrap_angle
 from visibility_builder.errors import VisibilityBuilderError
-from visibility_builder.synthesis import messages
 
 __all__ = ['write_estimated_bag']
 

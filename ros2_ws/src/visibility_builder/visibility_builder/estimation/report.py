@@ -34,7 +34,7 @@ def write_estimation_report(folder: Path, result: Any, figures: dict[str, Any],
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from landmark_db.atomic import write_text_atomic
+    from vbn_common.atomic import write_text_atomic
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,1 @@
+"""The ``vbn`` command line: a dispatcher plus one thin module per subcommand."""

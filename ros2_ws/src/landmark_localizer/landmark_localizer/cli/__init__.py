@@ -1,1 +1,0 @@
-"""``vbn`` subcommands contributed by landmark_localizer (see ``landmark_db.cli.main``)."""

@@ -1,0 +1,1 @@
+"""``vbn`` subcommands contributed by vbn_bench (see ``vbn_common.cli.main``)."""

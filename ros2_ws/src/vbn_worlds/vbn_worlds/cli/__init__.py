@@ -1,0 +1,1 @@
+"""``vbn`` subcommands contributed by vbn_worlds (see ``vbn_common.cli.main``)."""
