@@ -1,1 +1,0 @@
-"""The ``vbn`` command line: a dispatcher plus one thin module per subcommand."""
