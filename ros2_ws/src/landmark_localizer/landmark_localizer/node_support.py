@@ -153,8 +153,8 @@ def limit_malloc_arenas(arenas: int = _ARENAS) -> bool:
     on two executor threads in turn, freed memory was left scattered over several arenas
     and the node's resident memory grew by a quarter over 10,000 frames (239 to 301 MiB);
     with two arenas it stayed flat (1.02x). The frame worker and the executor thread still
-    allocate both, so the cap stays (tests/integration/test_localizer_node.py checks
-    10,000 frames). Elsewhere than glibc this does nothing.
+    allocate both, so the cap stays (the node's test over 10,000 frames checks it).
+    Elsewhere than glibc this does nothing.
     """
     try:
         libc = ctypes.CDLL(None)

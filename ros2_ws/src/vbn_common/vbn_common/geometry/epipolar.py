@@ -164,7 +164,7 @@ def planar_sampson(g1: np.ndarray, g2: np.ndarray, theta: np.ndarray,
     ``E = [T]x Rz(theta)^T`` with ``T = -(cos psi, sin psi, 0)``, ``psi = phi - theta``,
     and for unit rays ``|E g1|^2 = 1 - (T.h)^2`` (``h = Rz(theta)^T g1``) and
     ``|E^T g2|^2 = 1 - (T.g2)^2``: no matrix per motion is formed (equal to
-    :func:`planar_epipolar_residuals`, ``tests/unit/vbn_common/test_two_view.py``).
+    :func:`planar_epipolar_residuals`, ``ros2_ws/src/vbn_common/test/test_two_view.py``).
     """
     c, s = np.cos(theta), np.sin(theta)
     hx = c * g1[:, 0] + s * g1[:, 1]
