@@ -15,7 +15,7 @@ from hypothesis import settings
 
 # The fixtures every package's tests share (ros2_ws/test_support, on pytest's pythonpath):
 # the DDS domain of the run, processes stopped at teardown, the session's room database.
-pytest_plugins = ['fixtures']
+pytest_plugins = ['vbn_fixtures']
 
 settings.register_profile('vbn', derandomize=True, database=None, deadline=None,
                           print_blob=True)

@@ -1,7 +1,7 @@
 """Helpers for tests that start real nodes in subprocesses and talk to them over DDS.
 
 Importable from every package's tests (pytest's ``pythonpath`` includes this folder); the
-fixtures that use them are in ``fixtures.py`` beside it.
+fixtures that use them are in ``vbn_fixtures.py`` beside it.
 """
 from __future__ import annotations
 
