@@ -22,7 +22,26 @@ def main(args: list[str] | None = None) -> int:
     subscriptions and the progress timer go on.
     """
     return run_node('builder', _make_node, args, threads=3, start=lambda node: node.start(),
-                    close=lambda node: node.close())
+                    close=lambda node: node.close(), help_text=_help)
+
+
+def _help() -> str:
+    from vbn_common.node_main import NodeParameter, format_node_help
+    from visibility_builder.build_config import BuildConfig, flat_config, setting_descriptions
+    from visibility_builder.builder_node import NODE_PARAMETERS, READ_ONLY
+
+    describe = setting_descriptions()
+    parameters = [NodeParameter(name, default, text, name in READ_ONLY)
+                  for name, (default, text) in NODE_PARAMETERS.items()]
+    parameters += [NodeParameter(name, value, describe.get(name, ''), False)
+                   for name, value in flat_config(BuildConfig()).items()]
+    return format_node_help(
+        'builder [-h] --ros-args -p db:=FILE [-p bag:=BAG] [-p NAME:=VALUE ...]',
+        'The builder node: builds the landmark database of an exploration bag (file mode, '
+        '-p bag:=BAG) or of what it records from the live topics (live mode: on '
+        '~/build or after idle_timeout seconds without a new image), publishing its '
+        'progress and the regions. The build settings are those of vbn build --set.',
+        parameters)
 
 
 def _make_node() -> object:
