@@ -55,7 +55,7 @@ class WorldInstance:
 
     Attributes:
         poses: ``(n, 2)`` float pose coordinates, metres, or ``(n, 3)`` with a heading
-            (radians) in a pose space with heading (issue 15: a pose per position and
+            (radians) in a pose space with heading (a pose per position and
             heading sector for cameras that do not see all around).
         edges: ``(m, 2)`` int pose index pairs of the undirected graph G.
         feature_ids: ``(f,)`` int64 feature ids, sorted and unique.

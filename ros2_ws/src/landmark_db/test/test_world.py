@@ -121,7 +121,7 @@ def test_dict_round_trip_preserves_visibility(nx, ny, f, seed):
 
 def test_a_pose_space_with_heading_has_one_pose_per_position_and_heading() -> None:
     visible = np.eye(3, dtype=bool)
-    # Two headings at one position are two poses (issue 15's heading pose space).
+    # Two headings at one position are two poses (the heading pose space).
     world = WorldInstance.from_visibility([[0, 0, 0], [0, 0, math.pi / 4], [0.25, 0, 0]],
                                           [[0, 1], [0, 2]], visible)
     assert world.poses.shape == (3, 3)

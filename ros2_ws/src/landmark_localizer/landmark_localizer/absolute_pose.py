@@ -1,4 +1,4 @@
-"""The camera pose from the database's 3-D class points, where no region serves (issue 15).
+"""The camera pose from the database's 3-D class points, where no region serves.
 
 The thesis localizes only inside a region: the two model views and the region's k
 features give the pose (7.4, 7.5). A camera that does not see all around leaves much

@@ -1,4 +1,4 @@
-"""Compiled Gauss-Newton steps on the angular errors of rays to 3-D points (issue 16).
+"""Compiled Gauss-Newton steps on the angular errors of rays to 3-D points.
 
 Not in the thesis. :func:`~landmark_localizer.absolute_pose.refine_absolute` polishes a
 tracked frame's pose on a hundred rays two or three times a frame; written with numpy

@@ -1,4 +1,4 @@
-"""Frames without a pose from the images, bridged by the odometry (issue 18).
+"""Frames without a pose from the images, bridged by the odometry.
 
 Not in the thesis. Where the images give no trustworthy pose (the region's features
 hidden by a person, posters taken down, a frame dropped under load), a navigation stack
@@ -15,7 +15,7 @@ the disagreement.
 The odometry's error model (per metre driven: ``bridge_std_per_m`` of the distance
 along and across, ``bridge_yaw_deg_per_m`` of heading; per radian turned:
 ``bridge_yaw_std_per_rad``) is deliberately wider than a wheel's usual 1 to 2 %: a
-covariance that claims less than it knows is what the issue forbids. 8 % per metre
+covariance that claims less than it knows is what must never be. 8 % per metre
 keeps a wheel slipping by 20 % for a stretch within 2.5 standard deviations (a run with
 three such bursts and three 1 s odometry dropouts: 97.8 % of its poses within 3 sigma
 at 8 %, 96.4 % at 5 %).

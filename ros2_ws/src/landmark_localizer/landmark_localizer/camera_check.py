@@ -1,7 +1,7 @@
 """Whether a camera's ``CameraInfo`` is the camera a database was built with (pure).
 
 The localizer (node and ``vbn localize``) reads each run's frames with the run's own
-``CameraInfo`` (issue 15): another resolution or calibration is fine; another kind of
+``CameraInfo``: another resolution or calibration is fine; another kind of
 camera (cylindrical panorama, pinhole, fisheye) or another distortion model is refused,
 in one line naming both cameras (:func:`frame_camera`, :func:`camera_mismatch`).
 """

@@ -1,4 +1,4 @@
-"""Every compiled kernel of a tracked frame, loaded before the first frame (issue 16).
+"""Every compiled kernel of a tracked frame, loaded before the first frame.
 
 Not in the thesis. numba compiles a kernel on its first call, or loads the machine
 code it cached on an earlier run (``cache=True``): a few milliseconds a kernel from the

@@ -152,7 +152,7 @@ class DatabaseIndex:
         self.position_tree = cKDTree(self.xy)
         self.spacing = float(database.poses.spacing or _median_spacing(self.position_tree,
                                                                        self.xy))
-        # The pose space: positions, or (issue 15) positions and heading sectors. A
+        # The pose space: positions, or positions and heading sectors. A
         # heading h joins the position as r (cos h, sin h), with r such that the
         # neighbouring sectors lie one grid spacing apart: distances, balls and nearest
         # poses then weigh a turn by one sector like a step to a neighbouring position.

@@ -1,4 +1,4 @@
-"""The absolute pose near the odometry's prediction, with the map's patches (issue 18).
+"""The absolute pose near the odometry's prediction, with the map's patches.
 
 Not in the thesis. Where no region verifies (a changed stretch of the world: its
 landmark's posters rehung, a cupboard in front of the rest), the frame's SIFT matches to

@@ -265,7 +265,7 @@ class LocalizerNode(FrameHandling, LifecycleNode):
         """Answer a transition that the current state does not have with ``success=False``.
 
         This rclpy (Jazzy's wheel) raises ``RCLError: Transition is not registered`` out of
-        the ``~/change_state`` service callback, which ends the node (rclpy issue 1209,
+        the ``~/change_state`` service callback, which ends the node (ros2/rclpy#1209,
         fixed upstream by rclpy pull request 1319): a lifecycle manager asking for a
         transition at the wrong time must not take the localizer down.
         """

@@ -65,7 +65,7 @@ class NodeSettings:
             the odometry history restarts.
         image_reliable: Subscribe to the images reliable (still depth 1) instead of best
             effort; for raw images over 0.5 MB, which Fast DDS drops between processes when
-            best effort (rmw_fastrtps issue 739); needs a reliable publisher.
+            best effort (ros2/rmw_fastrtps#739); needs a reliable publisher.
     """
 
     db: str = ''

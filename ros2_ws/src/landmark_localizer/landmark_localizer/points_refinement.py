@@ -1,4 +1,4 @@
-"""A two-view pose checked and polished on 3-D points (issues 15 and 16).
+"""A two-view pose checked and polished on 3-D points.
 
 Not in the thesis. The thesis's pose comes from the region's k features in two or three
 model views (7.4, 7.5). The tracked features that have a triangulated class point
@@ -44,7 +44,7 @@ BALANCE_RANGE = (0.2, 5.0)
 
 
 class SourceBalance:
-    """How much a tracked feature's point counts beside a scene point (issue 16).
+    """How much a tracked feature's point counts beside a scene point.
 
     Not in the thesis. Two sources measure a tracked frame's points: the tracked features
     (Lucas-Kanade from frame to frame, re-anchored on a SIFT keypoint a few a frame, so

@@ -1,4 +1,4 @@
-"""Scene points measured by the exploration's own patches (issue 16).
+"""Scene points measured by the exploration's own patches.
 
 Not in the thesis. :mod:`.scene_tracks` measures scene points in the tracked frames from
 a patch of the frame where SIFT found each point; births spend the frame's few SIFT

@@ -1,4 +1,4 @@
-"""Scene points measured in the tracked frames: more geometry for the pose (issue 16).
+"""Scene points measured in the tracked frames: more geometry for the pose.
 
 Not in the thesis. The thesis poses a frame from the region's k features in two or three
 model views (7.4, 7.5), and :func:`~landmark_localizer.points_refinement.refine_on_points`
@@ -34,7 +34,7 @@ Angles become pixels by the frame camera's pixels per radian, so the windows mea
 same on a panorama (163 px/rad at 1024 px) as on a 640 px pinhole of 90 deg (320).
 
 Measured in docs/localization.md, section "The structure-based peer and scene points in
-tracked frames (issue 16)".
+tracked frames".
 """
 from __future__ import annotations
 

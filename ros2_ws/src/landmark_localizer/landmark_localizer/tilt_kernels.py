@@ -1,4 +1,4 @@
-"""Compiled Gauss-Newton of the tilted two-view pose (issue 15 item 2, issue 16).
+"""Compiled Gauss-Newton of the tilted two-view pose.
 
 :func:`~landmark_localizer.tilt_refinement.refine_tilted` solves ``(x, y, yaw, pitch,
 roll, dz)`` on the coplanarity errors of every model view's correspondences, with

@@ -1,4 +1,4 @@
-"""The pose refinement with the frame's own pitch, roll and height (issue 15 item 2).
+"""The pose refinement with the frame's own pitch, roll and height.
 
 :func:`~landmark_localizer.pose.refine_pose` solves the planar pose ``(x, y, yaw)`` on
 the epipolar errors of all model views (thesis 7.4 and 7.5: planar motion, a level

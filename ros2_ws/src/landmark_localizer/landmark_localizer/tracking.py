@@ -129,7 +129,7 @@ class Tracker:
         self._ids = IdTable(index.n_classes)
         self._reference: dict[int, np.ndarray] = {}
         self.windows = 0  # SIFT windows searched this frame
-        # The scene points measured beside the region's features (issue 16).
+        # The scene points measured beside the region's features.
         self.scene = scene_tracker(index, config, detector)
         self.set_config(config)
 

@@ -1,4 +1,4 @@
-"""Frames without a pose from the images, bridged by the odometry (issue 18), by hand."""
+"""Frames without a pose from the images, bridged by the odometry, by hand."""
 from __future__ import annotations
 
 import math

@@ -105,7 +105,7 @@ def test_room_run_poses_regions_tf_markers_diagnostics(room_db, start_process,
     listener.wait_settled()
     assert node.popen.poll() is None, node.output
 
-    # The targets for room_run, from what arrives on /localizer/pose: a pose for
+    # The targets for room_run, from what arrives on /localizer/pose: a pose for
     # at least 98 % of the frames, in map with the image's stamp, translation median at
     # most 1 cm and 95th percentile at most 5 cm, heading median at most 0.2 degree.
     # (Availability itself is the offline benchmark's: every frame, at its own pace.)

@@ -1,4 +1,4 @@
-"""Scene points measured by their exploration patches (issue 16): exact, robust, judged."""
+"""Scene points measured by their exploration patches: exact, robust, judged."""
 from __future__ import annotations
 
 from dataclasses import replace

@@ -1,4 +1,4 @@
-"""Scene points measured in tracked frames (issue 16): birth, alignment, pruning, gating."""
+"""Scene points measured in tracked frames: birth, alignment, pruning, gating."""
 from __future__ import annotations
 
 from dataclasses import replace

@@ -116,10 +116,10 @@ def test_runs_at_more_seeds_are_summed_up_per_run_and_each_carries_the_targets()
     assert ('| room_run, peer tracking | base, 11, 12 | 0.040 cm | 0.100 cm | 0.20 cm | '
             '0.0050 deg | 100.0 % |') in text
     assert 'room_run_effects, ours' not in text     # one run: nothing to sum up
-    # Every seed has its own rows against the accuracy issue's targets.
-    assert '| room_run@s11 translation p95 (evo, issue 16), m | 0.0041 | <= 0.003 | FAIL |' \
+    # Every seed has its own rows against the accuracy targets.
+    assert '| room_run@s11 translation p95 (evo), m | 0.0041 | <= 0.003 | FAIL |' \
         in text
-    assert '| room_run@s12 translation p95 (evo, issue 16), m | 0.0029 | <= 0.003 | PASS |' \
+    assert '| room_run@s12 translation p95 (evo), m | 0.0029 | <= 0.003 | PASS |' \
         in text
 
 

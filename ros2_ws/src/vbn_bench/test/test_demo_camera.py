@@ -55,7 +55,7 @@ def test_lens_demo_renders_what_is_missing(tmp_path: Path, monkeypatch) -> None:
     assert argv[argv.index('--out') + 1] == str(tmp_path / 'room_exploration_fisheye')
 
 
-def test_lens_targets_are_the_issues() -> None:
+def test_lens_targets_are_the_documented_ones() -> None:
     t = Thresholds(**LENS_TARGETS)
     assert (t.availability, t.translation_median_m, t.translation_p95_m,
             t.heading_median_deg) == (0.95, 0.02, 0.08, 0.5)

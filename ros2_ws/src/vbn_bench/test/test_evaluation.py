@@ -135,7 +135,7 @@ def test_latency_split_by_state() -> None:
     assert math.isnan(latency_summary(seconds[:3], voted[:3]).lost_p95)
 
 
-def test_checks_against_the_issue_targets() -> None:
+def test_checks_against_the_targets() -> None:
     stamps, truth = straight_run(100)
     est = truth.copy()
     est[:, 0] += 0.004

@@ -1,4 +1,4 @@
-"""Integrity figures of a run (issue 18): hand-made runs with known errors and covariances."""
+"""Integrity figures of a run: hand-made runs with known errors and covariances."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,4 @@
-"""vbn localize on the sample run: the issue's accuracy and availability, read back by evo.
+"""vbn localize on the sample run: the accuracy and availability, read back by evo.
 
 The room database is built once per session with the builder's defaults; the whole of
 ``bags/room_run`` (439 panoramas) is localized offline in 10 to 30 s.
@@ -54,7 +54,7 @@ def test_room_run_meets_the_accuracy_and_availability_targets(room_run: dict) ->
     assert ours['translation_median_m'] == pytest.approx(evo['translation_median_m'],
                                                          abs=1e-6)
     assert 'availability' in room_run['stdout'] and 'accuracy (evo)' in room_run['stdout']
-    # The thesis's two-view pose, reported beside the pose refined from it (issue 16): on
+    # The thesis's two-view pose, reported beside the pose refined from it: on
     # every tracked frame, and the refinement on 3-D points beats it.
     seed = figures['two_view']
     assert 'two-view seed' in room_run['stdout']
@@ -110,7 +110,7 @@ def test_a_run_of_another_camera_is_an_error_naming_both(room_db: Path, tmp_path
 
 def test_a_run_camera_at_another_resolution_is_read_with_its_own_camera_info(
         room_db: Path, tmp_path) -> None:
-    # Issue 15: a 2048 x 512 panorama against the database of 1024 x 256 ones.
+    # A 2048 x 512 panorama against the database of 1024 x 256 ones.
     run = tmp_path / 'fine_run'
     made = vbn('render', '--scene', 'room', '--kind', 'run', '--width', '2048', '--height',
                '512', '--duration', '6', '--compressed', '--out', str(run))
@@ -126,7 +126,7 @@ def test_a_run_camera_at_another_resolution_is_read_with_its_own_camera_info(
 
 def test_a_run_camera_on_another_mount_is_levelled_with_its_own_tf_static(
         room_db: Path, tmp_path) -> None:
-    # Issue 15: a second robot whose camera is pitched 2 degrees, against the database
+    # A second robot whose camera is pitched 2 degrees, against the database
     # of a level one; its /tf_static says so.
     run = tmp_path / 'pitched_run'
     made = vbn('render', '--scene', 'room', '--kind', 'run', '--camera-pitch', '2',

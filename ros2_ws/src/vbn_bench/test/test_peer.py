@@ -1,4 +1,4 @@
-"""The structure-based peer (issue 16): its map's geometry, its matching, its pose."""
+"""The structure-based peer: its map's geometry, its matching, its pose."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,4 @@
-"""A bad ROS 2 environment gives one clear line through the real ``vbn`` (issue 7).
+"""A bad ROS 2 environment gives one clear line through the real ``vbn``.
 
 Before: ``ROS_DOMAIN_ID=abc`` ended in an RCLError traceback, ``ROS_DOMAIN_ID=300`` in
 a Fast DDS port error without a verdict, ``RMW_IMPLEMENTATION=rmw_cyclonedds_cpp`` in

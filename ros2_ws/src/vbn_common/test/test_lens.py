@@ -1,4 +1,4 @@
-"""Lens distortion: plumb_bob, rational_polynomial and the equidistant fisheye (issue 15)."""
+"""Lens distortion: plumb_bob, rational_polynomial and the equidistant fisheye."""
 from __future__ import annotations
 
 import math

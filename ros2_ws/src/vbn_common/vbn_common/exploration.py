@@ -1,4 +1,4 @@
-"""Read an exploration bag: images, camera info and the pose of every image (issue 8, step 1).
+"""Read an exploration bag: images, camera info and the pose of every image.
 
 The first step of the offline builder (thesis Chapter 6): the images of the
 exploration and the planar pose each was taken at. Messages come through the

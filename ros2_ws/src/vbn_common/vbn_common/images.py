@@ -1,6 +1,6 @@
 """Decode camera images: ``sensor_msgs/Image`` and ``sensor_msgs/CompressedImage`` to numpy.
 
-The one image-decoding function of the project (issue 8, step 1), shared by the
+The one image-decoding function of the project, shared by the
 builder and the localizer. Messages are duck-typed: anything with the fields of
 ``sensor_msgs/Image`` (``encoding``, ``height``, ``width``, ``step``,
 ``is_bigendian``, ``data``) or of ``sensor_msgs/CompressedImage`` (``format``,

@@ -1,4 +1,4 @@
-"""Align small image patches in an image where an affine warp predicts them (issue 16).
+"""Align small image patches in an image where an affine warp predicts them.
 
 Not in the thesis. A scene point of the database keeps a patch of one exploration image
 centred on the point, and the patch's axes (the 3-D steps of one patch pixel right and

@@ -1,4 +1,4 @@
-"""The rendered room gives SIFT many distinctive, stable features (issue 4)."""
+"""The rendered room gives SIFT many distinctive, stable features."""
 from __future__ import annotations
 
 import cv2

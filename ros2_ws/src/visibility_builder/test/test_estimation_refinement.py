@@ -1,4 +1,4 @@
-"""Tracks from pairwise matches and the bundle adjustment with odometry (issue 17, point 4)."""
+"""Tracks from pairwise matches and the bundle adjustment with odometry."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,4 @@
-"""The exploration patches of scene points (issue 16): views, axes, patches, by hand."""
+"""The exploration patches of scene points: views, axes, patches, by hand."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""The exploration's image around each scene point, kept to measure the point by (issue 16).
+"""The exploration's image around each scene point, kept to measure the point by.
 
 Not in the thesis. The localizer measures scene points in its tracked frames
 (:mod:`landmark_localizer.scene_tracks`). Searching each one by SIFT in the frame spends

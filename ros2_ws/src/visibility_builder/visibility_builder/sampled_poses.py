@@ -1,4 +1,4 @@
-"""Sampled poses and the pose graph G of an exploration (issue 8, step 2).
+"""Sampled poses and the pose graph G of an exploration.
 
 Thesis Section 6.2.1 assumes "exactly one image per sampling position": images
 taken at one position are integrated into one pose (the Room 408 data set took
@@ -29,7 +29,7 @@ Steps:
    between the poses are then defined everywhere. A lattice graph is left as it is
    (a gap in a grid is a wall or an obstacle), with a warning if it falls apart.
 
-**Heading pose space** (cameras that do not see all around; issue 15): a pinhole
+**Heading pose space** (cameras that do not see all around): a pinhole
 image sees a quarter of the room, so merging the headings of one position into one
 pose (the rule above) gives poses whose features no single image shows. With
 ``headings`` sectors (``N``, or the exploration's own count of headings per position

@@ -1,6 +1,6 @@
 """The scene points of the database: each verified class triangulated from all its images.
 
-Not in the thesis; a departure with a reason (issue 15). A camera that does not see all
+Not in the thesis; a departure with a reason. A camera that does not see all
 around has places (facing a near wall) where no k features are visible from a whole
 neighbourhood, so the decomposition leaves them without a region, and the localizer
 had only the points it could triangulate from the regions' two or three model views.
@@ -67,7 +67,7 @@ class PointsConfig:
         patch_min_views: only a point seen by at least this many exploration images
             keeps a patch (the patches are most of a point's bytes). 5, not 8: the
             localizer then has more patched points to choose from where it stands
-            (issue 16, measured over three seeds of five runs: the pinhole room's p95
+            (measured over three seeds of five runs: the pinhole room's p95
             0.58 -> 0.41 cm, the panoramic runs' 0.28 to 0.35 -> 0.25 to 0.31 cm).
         patch_quality: JPEG quality the file stores the patches at, 1 to 100 (0: whole
             pixels); at 70 a 15 px patch takes about 45 bytes instead of 225 (70, not

@@ -1,4 +1,4 @@
-"""The surface each scene point lies on, from its neighbouring points (issue 16).
+"""The surface each scene point lies on, from its neighbouring points.
 
 Not in the thesis. A scene point's patch is warped into a frame by an affine map that
 its axes predict (:mod:`.point_patches`); the axes lie on a plane through the point.

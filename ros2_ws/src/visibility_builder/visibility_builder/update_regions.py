@@ -1,4 +1,4 @@
-"""The regions a database update adds, and the world it decomposes (issue 18).
+"""The regions a database update adds, and the world it decomposes.
 
 Part of ``vbn db-update`` (:mod:`.db_update`): after the regions an update leaves
 intact are kept, the poses they no longer serve get regions of a new decomposition

@@ -1,4 +1,4 @@
-"""The landmark database: one SQLite file per built world (issue 8, section 2).
+"""The landmark database: one SQLite file per built world.
 
 :mod:`.model` holds the in-memory database (frozen, validated dataclasses; the build's
 camera and settings in :mod:`.build_info`, the field checks in :mod:`.fields`),

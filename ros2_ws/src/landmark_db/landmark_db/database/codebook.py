@@ -1,6 +1,6 @@
 """Compact SIFT descriptors: a product quantizer trained on the database's own descriptors.
 
-Beyond the thesis (issue 16: a database at most a third of a structure-based peer's
+Beyond the thesis (a database at most a third of a structure-based peer's
 compact map). The thesis stores each representative descriptor whole (Section 6.2.1:
 128 bytes); most of a database file is descriptors: the classes', the model views'
 (Section 7.2) and the scene points'. A product quantizer (Jégou, Douze and Schmid,

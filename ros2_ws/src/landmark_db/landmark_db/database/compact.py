@@ -1,4 +1,4 @@
-"""A database in the fewest bytes its file needs (schema 5, issue 16; beyond the thesis).
+"""A database in the fewest bytes its file needs (schema 5; beyond the thesis).
 
 :func:`compact_database` is the builder's last step before writing, and
 ``vbn db-update``'s: every descriptor replaced by its product-quantizer code's

@@ -24,7 +24,7 @@ whether the regions form a valid decomposition is the validator's job
 (``vbn db-export`` then ``vbn validate``), so that a database built with a faulty
 decomposition can still be opened and inspected.
 
-Two departures from a literal reading of the issue, both documented where they apply:
+Two departures from a literal reading of the task, both documented where they apply:
 a model view may hold features of its image that belong to no class (class id ``-1``),
 kept for the matching symmetry check of Section 6.2.1; and :class:`BuildInfo` carries
 ``decomposition_seconds`` so that the exported decomposition reports the real time.

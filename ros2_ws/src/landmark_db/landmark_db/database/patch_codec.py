@@ -1,4 +1,4 @@
-"""The scene points' exploration patches stored as JPEG mosaics (schema 5, issue 16).
+"""The scene points' exploration patches stored as JPEG mosaics (schema 5).
 
 Beyond the thesis. A patch is ``s x s`` uint8 pixels (``s`` odd, 15 by default), cut
 from the exploration image nearest where its point was seen; the localizer aligns it in

@@ -1,4 +1,4 @@
-"""The scene points of a landmark database: a sparse 3-D map beside the regions (issue 15).
+"""The scene points of a landmark database: a sparse 3-D map beside the regions.
 
 The thesis localizes only inside a region (Sections 7.4, 7.5), and a region needs k
 features visible from every pose of a neighbourhood. A camera that does not see all
@@ -55,11 +55,11 @@ class ScenePoints(ArrayEquality):
             centre ``(x, y)`` of its images' camera positions and the largest distance
             of one of them from that centre (metres); NaN rows where unknown (a schema 2
             file). The localizer searches a point only from near where it was seen
-            (SIFT finds a feature at the scales it was seen at; issue 16).
+            (SIFT finds a feature at the scales it was seen at).
         patches: ``(n, s, s)`` uint8 (``s`` odd) the image around each point in one
             exploration image that saw it, centred on the point's reprojection there
             (schema 4; ``None`` in older files): the localizer aligns it in every
-            tracked frame (issue 16). Rows of points with no patch are zero.
+            tracked frame. Rows of points with no patch are zero.
         patch_axes: ``(n, 2, 3)`` float32 the 3-D offsets from the point, on the plane
             through it facing that exploration camera, that move its projection one
             pixel right and one pixel down in the patch; NaN rows where a point has no

@@ -1,7 +1,7 @@
 """The scene points' rows of the database file (``scene_points``, :mod:`.schema`).
 
 Written and read by :mod:`.store` inside its transaction: schema 1 files have no table
-(no point), schema 2 no ``seen_*`` columns, schema 3 no ``patch*`` columns (issue 16);
+(no point), schema 2 no ``seen_*`` columns, schema 3 no ``patch*`` columns;
 what a file lacks is read as unknown.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The classes' and regions' rows of the database file (:mod:`.schema`), every version.
 
-Written and read by :mod:`.store` inside its transaction. Schema 5 (issue 16: a
+Written and read by :mod:`.store` inside its transaction. Schema 5 (a
 database a third of a structure-based peer's compact map) keeps what earlier versions
 spread over one row per item in BLOBs of the narrowest exact type: a class's
 descriptors (whole or their codes, :mod:`.codebook`) in its ``classes`` row, a

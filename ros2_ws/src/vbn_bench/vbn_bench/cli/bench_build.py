@@ -7,7 +7,7 @@ Example::
 
 For each bag: wall time per step, peak memory of the whole process tree (SIFT workers
 included), database size against the full unpruned feature database, regions and
-coverage, against the issue's targets. Then a k x rho sweep of the decomposition on the
+coverage, against the targets. Then a k x rho sweep of the decomposition on the
 room bag (thesis Figures 8.8 to 8.15) into ``sweep.png`` and ``results.json``.
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ __all__ = ['register', 'run']
 
 ROOT_BAGS = ('bags/room_exploration', 'cache/room_exploration_pinhole',
              'cache/floor_exploration')
-#: The issue's time targets (seconds) per bag name, and 4 GB of peak memory for the floor.
+#: The time targets (seconds) per bag name, and 4 GB of peak memory for the floor.
 TARGETS = {'room_exploration': 30.0, 'room_exploration_pinhole': 120.0,
            'floor_exploration': 300.0}
 

@@ -1,4 +1,4 @@
-"""``vbn bench-estimate``: image poses from images and odometry against the truth (issue 17).
+"""``vbn bench-estimate``: image poses from images and odometry against the truth.
 
 Example::
 
@@ -40,7 +40,7 @@ HEADINGS = {'panoramic': 1, 'pinhole': 8, 'fisheye': 4}
 def register(subparsers: Any) -> None:
     """Add the ``bench-estimate`` subcommand."""
     parser = subparsers.add_parser(
-        'bench-estimate', help='estimated exploration poses against the truth (issue 17)',
+        'bench-estimate', help='estimated exploration poses against the truth',
         description='Render driven explorations, estimate their poses from the images and '
                     'the odometry, judge them against the ground truth, and localize '
                     'bags/room_run with databases built from estimated and true poses.')

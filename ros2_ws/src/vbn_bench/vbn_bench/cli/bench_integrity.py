@@ -1,4 +1,4 @@
-r"""``vbn bench-integrity``: never a confident wrong pose, in worlds that changed (issue 18).
+r"""``vbn bench-integrity``: never a confident wrong pose, in worlds that changed.
 
 Example::
 
@@ -14,7 +14,7 @@ against the database updated by ``vbn db-update`` with an exploration of the cha
 world) and localized in this process with no initial pose. Per run it prints frames
 posed, translation median and p95, poses more than 50 cm off, the share of poses within
 3 sigma of their covariance (position ellipse and heading), start-up and recovery
-frames (:mod:`vbn_bench.localization.integrity`), against the issue's targets: no
+frames (:mod:`vbn_bench.localization.integrity`), against the targets: no
 pose 50 cm off, 99 % within 3 sigma over all runs, start-up and recovery within 3
 frames, in the changed worlds 95 % posed and p95 5 cm, and after the update the
 unchanged run's figures (within 1.5x) or, where the changed run is harder, those of a

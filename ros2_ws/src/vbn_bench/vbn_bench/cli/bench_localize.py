@@ -1,4 +1,4 @@
-r"""``vbn bench-localize``: the localizer's figures of its issue, beside the baseline.
+r"""``vbn bench-localize``: the localizer's figures against its targets, beside the baseline.
 
 Example::
 
@@ -15,17 +15,17 @@ starts from a fresh process with ``OPENBLAS_NUM_THREADS=1``:
 - ``cache/room_run_effects`` (rendered here if missing, with exposure, blur and noise);
 - ``cache/floor_run`` on the floor database (``cache/floor_exploration``): its latency
   targets, TRACKING latency against the room's (it must not grow), and accuracy and
-  availability reported (the issue's accuracy targets are the room runs'), also split
+  availability reported (the accuracy targets are the room runs'), also split
   by whether the true position lies in one of the database's regions;
 - with ``--cameras pinhole,fisheye``: the lens rooms of ``vbn demo --camera`` (rendered
   into ``--cache`` as ``room_exploration_CAMERA_lens`` and ``room_run_CAMERA_lens`` if
-  missing, their databases built into ``--out``), checked against the real-cameras
-  issue's targets (95 % posed, median 2 cm, p95 8 cm, heading median 0.5 deg, no pose
+  missing, their databases built into ``--out``), checked against the lens
+  cameras' targets (95 % posed, median 2 cm, p95 8 cm, heading median 0.5 deg, no pose
   50 cm off; the pinhole's TRACKING p95 on one core at most 12 ms);
 - with ``--seeds S,...``: each room run above (and each lens run) again at every seed
   (:mod:`vbn_bench.localization.seeds`: rendered into ``--cache`` if missing, on the
   same database, the peer beside it), each against the targets and summed up per run;
-- with ``--conditions NAME,...`` (or ``all``): the real-cameras issue's other rows
+- with ``--conditions NAME,...`` (or ``all``): the lens cameras' and conditions' rows
   (:mod:`vbn_bench.localization.conditions`: a panorama pitched 2 degrees against the
   level one, a run shaking 0.5 degrees, a run camera 5 cm higher, a 1280 x 960 pinhole
   run on the 640 x 480 database, the 25 cm floor through the lens cameras), their bags
@@ -37,7 +37,7 @@ starts from a fresh process with ``OPENBLAS_NUM_THREADS=1``:
   same exploration triangulated with its poses, every frame's SIFT matched to them and
   posed by pycolmap) on the same runs, both variants on ``room_run`` and the tracking
   one elsewhere (``--skip-peer``: none): side by side with ours, with the ratios, and
-  the accuracy issue's targets on each run that has a peer.
+  the accuracy targets on each run that has a peer.
 
 Databases that do not exist are built with ``vbn build`` (``--build-set`` passed on).
 Latency is wall-clock time per frame (decoding included) and, beside it, the process's
@@ -45,7 +45,7 @@ CPU time per frame: on a machine that others share, the pinned CPU runs other wo
 too, and the CPU time says what a frame costs on one core of its own.
 
 Writes ``results.json`` and ``results.md`` into ``--out`` and prints the table; exits 0
-when every target of the issue is met, 1 otherwise.
+when every target is met, 1 otherwise.
 """
 from __future__ import annotations
 
@@ -65,11 +65,11 @@ def register(subparsers: Any) -> None:
     """Add the ``bench-localize`` subcommand."""
     parser = subparsers.add_parser(
         'bench-localize', help="the localizer's accuracy, availability, switching, recovery "
-                              'and latency against the issue targets, beside the baseline',
+                              'and latency against the targets, beside the baseline',
         description='Run vbn localize on one core over room_run, room_run_kidnapped, an '
                     'effects run and floor_run, and the full-feature-database baseline on '
                     'room_run and part of floor_run; print the figures against the '
-                    "issue's targets and the baseline's as ratios to ours.")
+                    "targets and the baseline's as ratios to ours.")
     parser.add_argument('--out', default='out/bench_localize', help='output directory')
     parser.add_argument('--room-db', default=None,
                         help='room database (default OUT/room.db, built if missing)')
@@ -218,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
 def _peer_runs(runs: dict[str, dict[str, Any]], out: Path, log: Path,
                args: argparse.Namespace, bags: Path, cache: Path, cameras: list[str],
                floor_db: Path | None) -> None:
-    """Add the structure-based peer's runs beside ours (``peer_MODE_RUN``; issue 16).
+    """Add the structure-based peer's runs beside ours (``peer_MODE_RUN``).
 
     Both variants on ``room_run``, the tracking one (what a user would run on a robot)
     on the kidnapped, effects and lens runs and on the first frames of the floor run.

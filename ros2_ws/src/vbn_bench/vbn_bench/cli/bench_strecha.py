@@ -21,7 +21,7 @@ intrinsics
 
 Each is judged by its camera centres against the ground truth after a similarity
 alignment (no method knows the scale): images posed, median and largest error (mm), and
-the wall time. Targets (issue 17, point 5): median within 2 x of the better pycolmap
+the wall time. Targets: median within 2 x of the better pycolmap
 mapper's, time within 2 x. Everything goes into ``OUT/summary.json``.
 """
 from __future__ import annotations

@@ -21,7 +21,7 @@ Then the recording is evaluated by the same code as ``vbn localize``
 availability (poses over the images played), region changes by prediction and after a
 loss and the per-frame latency (the node's ``/diagnostics``); ``OUT/trajectory.png``
 shows the estimated and true trajectories over the regions. The last line is
-``PASS`` or ``FAIL`` against the issue's targets for ``room_run`` (accuracy, availability,
+``PASS`` or ``FAIL`` against the targets for ``room_run`` (accuracy, availability,
 switching; latency on one core is ``vbn bench-localize``'s); the exit code is 0 only on
 PASS.
 
@@ -32,7 +32,7 @@ bridges them).
 ``--camera pinhole`` (or ``fisheye``) renders a pinhole room (90 degrees, plumb_bob
 distortion) or a fisheye room (180 degrees, equidistant) into ``OUT`` first, an
 exploration with 8 headings per position and a run (``vbn render``, :data:`LENS_BAGS`;
-kept for the next demo), and checks the real-cameras issue's targets for them.
+kept for the next demo), and checks the lens cameras' targets for them.
 
 DDS: the demo runs in its own random ``ROS_DOMAIN_ID`` (unless one is set) with
 localhost discovery, so it neither hears nor disturbs other ROS programs.

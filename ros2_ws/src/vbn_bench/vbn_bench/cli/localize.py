@@ -11,7 +11,7 @@ as it can (odometry from ``/odom`` interpolated at each image's stamp), writes
 copy of ``/ground_truth/pose`` into a bag that ``evo_ape bag2`` reads, and prints the
 run's figures: frames, poses, availability, region changes by prediction and after a
 loss, latency (decoding included) and, with ground truth, the accuracy computed here
-and by evo from the written bag. ``--one-core`` measures latency as the issue asks:
+and by evo from the written bag. ``--one-core`` measures latency as the targets ask:
 BLAS and OpenCV on one thread, the process pinned to one CPU.
 """
 from __future__ import annotations

@@ -5,7 +5,7 @@ recorded run, timed), :mod:`.evaluation` (accuracy, availability, switching, lat
 recovery; evo's APE beside ours), :mod:`.baseline` (localization against every
 feature of the exploration, the comparison a user would make), :mod:`.plots`
 (trajectories over the regions), :mod:`.report` (the table of ``vbn bench-localize``),
-:mod:`.conditions` (the real-cameras issue's lens bags and conditions) and
+:mod:`.conditions` (the lens bags and conditions) and
 :mod:`.demo` (the evaluation of ``vbn demo``'s recording). The ``vbn`` commands
 ``localize``, ``bench-localize`` and ``demo`` are thin layers over them.
 """

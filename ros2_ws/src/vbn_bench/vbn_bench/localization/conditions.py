@@ -1,10 +1,10 @@
-"""The cameras and conditions of the real-cameras issue, as bags the benchmark renders.
+"""The lens cameras and conditions, as bags the benchmark renders.
 
 The lens rooms of ``vbn demo --camera`` (:data:`LENS_BAGS`, :func:`lens_render_argv`) and
 the conditions of ``vbn bench-localize --conditions`` (:data:`CONDITIONS`): each names the
 database it localizes against (the room's, a lens room's, or one built from its own
 exploration) and the ``vbn render`` arguments of its run, and :func:`condition_targets`
-gives the issue's targets for it:
+gives the targets for it:
 
 - ``level``: a level panorama run (seed 0, no image effects) on the room database, the
   reference of ``pitch2``;
@@ -29,10 +29,10 @@ from typing import Any
 __all__ = ['CONDITIONS', 'LENS_BAGS', 'LENS_HEADINGS', 'LENS_TRACKING_P95_S', 'Condition',
            'condition_targets', 'lens_render_argv', 'lens_targets']
 
-#: The real-cameras issue's TRACKING latency target for a pinhole camera, one core.
+#: The TRACKING latency target for a pinhole camera, one core.
 LENS_TRACKING_P95_S = 0.012
 
-#: ``vbn render`` settings of the lens cameras (the real-cameras issue's rows).
+#: ``vbn render`` settings of the lens cameras (the lens cameras' rows).
 LENS_BAGS: dict[str, tuple[str, ...]] = {
     'pinhole': ('--camera', 'pinhole', '--distortion', 'plumb_bob:-0.3,0.08,0.0005,-0.0005,0'),
     'fisheye': ('--camera', 'fisheye', '--hfov', '180',
@@ -121,7 +121,7 @@ def _accuracy(fig: dict[str, Any]) -> dict[str, Any]:
 
 def condition_targets(name: str, fig: dict[str, Any], runs: dict[str, dict[str, Any]]
                       ) -> list[tuple[str, float, float, bool]]:
-    """Return the issue's targets of one condition's run.
+    """Return the targets of one condition's run.
 
     Args:
         name: The condition (a key of :data:`CONDITIONS`).

@@ -13,7 +13,7 @@ from pathlib import Path
 
 __all__ = ['LENS_MAX_ERROR_M', 'LENS_TARGETS', 'evaluate_demo']
 
-#: The real-cameras issue's targets for a pinhole or fisheye room (``vbn demo --camera``).
+#: The targets for a pinhole or fisheye room (``vbn demo --camera``).
 LENS_TARGETS = {'translation_median_m': 0.02, 'translation_p95_m': 0.08,
                 'heading_median_deg': 0.5, 'availability': 0.95}
 #: No pose further off than this, metres.
@@ -30,7 +30,7 @@ def evaluate_demo(out: Path, recorded: Path, db: Path, run_bag: Path, scene: str
         db: The database localized against.
         run_bag: The bag played (its images are the frames).
         scene: Scene name or file drawn under the trajectories ('' for none).
-        lens: The real-cameras issue's targets (pinhole or fisheye: 95 % posed, median
+        lens: The targets (pinhole or fisheye: 95 % posed, median
             2 cm, p95 8 cm, heading median 0.5 deg, no pose 50 cm off) instead of
             room_run's.
 
@@ -114,10 +114,10 @@ def evaluate_demo(out: Path, recorded: Path, db: Path, run_bag: Path, scene: str
         largest = acc.translation_max_m if acc else math.nan
         checks.append(Check('largest translation error', largest, LENS_MAX_ERROR_M, True,
                             f'{largest * 100:.1f} cm'))
-        print(format_checks(checks, "against the real-cameras issue's targets:"))
+        print(format_checks(checks, "against the lens cameras' targets:"))
     else:
         checks = check_run(evaluation)
-        print(format_checks(checks, "against the issue's targets for room_run:"))
+        print(format_checks(checks, 'against the targets for room_run:'))
     results = evaluation.as_dict()
     results['diagnostics'] = diag
     results['checks'] = [{'name': c.name, 'value': c.value, 'limit': c.limit,

@@ -1,6 +1,6 @@
 """How well a localizer run went: accuracy, availability, switching, latency, recovery.
 
-The figures of the localizer's issue, computed the same way for ``vbn localize`` (the
+The localizer's figures, computed the same way for ``vbn localize`` (the
 core over a bag), ``vbn bench-localize`` and ``vbn demo`` (the node over DDS, from a
 recording):
 
@@ -431,7 +431,7 @@ def evo_ape(bag: str | os.PathLike[str], reference: str = names.GROUND_TRUTH_POS
 
 @dataclass(frozen=True)
 class Thresholds:
-    """The issue's targets.
+    """The targets.
 
     Attributes:
         translation_median_m: Largest median translation error.
@@ -483,7 +483,7 @@ class Check:
 def check_run(evaluation: RunEvaluation, thresholds: Thresholds = Thresholds(), *,
               accuracy: bool = True, switching: bool = True, latency: bool = False,
               recovery: bool = False) -> list[Check]:
-    """Check the run's figures against the issue's targets.
+    """Check the run's figures against the targets.
 
     Args:
         evaluation: The run.
@@ -494,7 +494,7 @@ def check_run(evaluation: RunEvaluation, thresholds: Thresholds = Thresholds(), 
         recovery: Check the recovery after each teleport (a run without a teleport fails).
 
     Returns:
-        The checks, in the issue's order.
+        The checks, in the targets' order.
     """
     t = thresholds
     checks: list[Check] = []

@@ -1,4 +1,4 @@
-"""Integrity of a run: whether the published covariance bounds the error (issue 18).
+"""Integrity of a run: whether the published covariance bounds the error.
 
 A navigation stack survives a localizer that says "I am lost"; it does not survive one
 that claims centimetres while it is most of a metre off. Per run, against the ground
@@ -6,7 +6,7 @@ truth:
 
 - **posed**: the share of frames with a pose;
 - **accuracy**: translation median and p95, heading median, and the poses more than
-  :data:`FAR_M` off (the issue's "confident wrong pose");
+  :data:`FAR_M` off (a "confident wrong pose");
 - **within 3 sigma**: the share of poses whose position error lies inside the 3-sigma
   ellipse of its covariance (squared Mahalanobis distance at most
   :data:`CHI2_2DOF_3SIGMA`, the 2-DoF chi-square quantile of 99.73 %) and whose heading
@@ -37,7 +37,7 @@ CHI2_2DOF_3SIGMA = -2.0 * math.log(1.0 - 0.9973)
 FAR_M = 0.5
 #: A pose within this of the truth is correct (start-up, recovery), metres.
 CORRECT_M = 0.05
-#: The share of poses within their 3-sigma bounds the issue asks for.
+#: The share of poses within their 3-sigma bounds the targets ask for.
 INTEGRITY_SHARE = 0.99
 
 

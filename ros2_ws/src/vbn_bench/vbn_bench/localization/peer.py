@@ -1,6 +1,6 @@
 """The structure-based peer: every frame's SIFT matched to a 3-D map, posed by pycolmap.
 
-The localizer a user of hloc or pycolmap would put beside ours (issue 16), against the
+The localizer a user of hloc or pycolmap would put beside ours, against the
 map of :mod:`.peer_map` built from the same exploration:
 
 - per frame, SIFT on the whole image (the landmark database's settings);

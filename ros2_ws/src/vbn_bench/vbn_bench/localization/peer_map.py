@@ -1,4 +1,4 @@
-"""The structure-based peer's map: SIFT tracks of the exploration, triangulated (issue 16).
+"""The structure-based peer's map: SIFT tracks of the exploration, triangulated.
 
 What a user of hloc or pycolmap builds from an exploration whose image poses are known,
 to localize against: SIFT on every exploration image; each image matched to its nearest

@@ -1,9 +1,9 @@
-"""Ours beside the structure-based peer in ``vbn bench-localize`` (issue 16).
+"""Ours beside the structure-based peer in ``vbn bench-localize``.
 
 The peer (:mod:`.peer`) runs on the same bags, on the same pinned core, in the same
 benchmark; its runs are named ``peer_global_RUN`` and ``peer_tracking_RUN`` after ours.
 :func:`peer_table` prints them side by side with the ratios peer / ours, and
-:func:`peer_targets` checks the accuracy issue's targets on every run that has a peer:
+:func:`peer_targets` checks the accuracy targets on every run that has a peer:
 translation median and p95, heading median, TRACKING latency (absolute and as a share of
 the peer's), and the database against the peer's compact map.
 """
@@ -18,7 +18,7 @@ __all__ = ['PeerTargets', 'peer_table', 'peer_targets']
 
 
 class PeerTargets:
-    """The accuracy issue's limits (issue 16)."""
+    """The accuracy limits."""
 
     translation_median_m = 0.001
     translation_p95_m = 0.003
@@ -103,15 +103,15 @@ def peer_targets(runs: dict[str, dict[str, Any]]) -> list[tuple[str, float, floa
             continue
         a = _acc(ours)
         checks += [
-            (f'{name} translation median (evo, issue 16), m',
+            (f'{name} translation median (evo), m',
              a.get('translation_median_m', math.nan), t.translation_median_m, True),
-            (f'{name} translation p95 (evo, issue 16), m',
+            (f'{name} translation p95 (evo), m',
              a.get('translation_p95_m', math.nan), t.translation_p95_m, True),
-            (f'{name} heading median (issue 16), deg', a.get('heading_median_deg', math.nan),
+            (f'{name} heading median, deg', a.get('heading_median_deg', math.nan),
              t.heading_median_deg, True),
-            (f'{name} largest translation error (issue 16), m',
+            (f'{name} largest translation error, m',
              a.get('translation_max_m', math.nan), t.largest_error_m, True),
-            (f'{name} latency TRACKING p95 (issue 16), s',
+            (f'{name} latency TRACKING p95, s',
              _num(ours, 'latency', 'tracking_p95'), t.tracking_p95_s, True)]
         fastest = min(_num(fig, 'latency', 'tracking_p95') for _, fig in peers)
         checks.append((f"{name} TRACKING p95 / the peer's", _num(ours, 'latency',

@@ -1,12 +1,12 @@
-"""The table of ``vbn bench-localize``: every run's figures against the issue's targets.
+"""The table of ``vbn bench-localize``: every run's figures against the targets.
 
 :func:`report` formats the ``vbn localize --json`` figures of the benchmark's runs as
-one Markdown table, checks the localizer issue's targets (room runs: accuracy,
+one Markdown table, checks the localizer's targets (room runs: accuracy,
 availability, switching, latency on one core; floor run: latency, and its TRACKING
-latency against the room's) and the real-cameras issue's (the lens rooms and the
+latency against the room's) and the lens cameras' (the lens rooms and the
 conditions of :mod:`vbn_bench.localization.conditions`), adds the baseline's figures
 as ratios to ours, and puts the structure-based peer beside ours with the accuracy
-issue's targets (:mod:`vbn_bench.localization.peer_report`).
+targets (:mod:`vbn_bench.localization.peer_report`).
 """
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ def _accuracy(fig: dict[str, Any]) -> dict[str, Any] | None:
 
 
 def report(runs: dict[str, dict[str, Any]]) -> tuple[str, bool]:
-    """Format the runs as the issue's table and check the targets.
+    """Format the runs as the table and check the targets.
 
     Args:
         runs: ``vbn localize --json`` figures by run name.
@@ -164,7 +164,7 @@ def _run_checks(family: str, name: str, fig: dict[str, Any]
 
 
 def _floor_report(floor: dict[str, Any]) -> list[str]:
-    """floor_run's accuracy and availability (reported: the issue's targets are the room's).
+    """floor_run's accuracy and availability (reported: the targets are the room's).
 
     Split by whether the true position lies in one of the database's regions: the
     builder's decomposition (sigma rule) leaves some k-coverable poses in none.

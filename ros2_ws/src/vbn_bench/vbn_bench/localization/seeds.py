@@ -1,7 +1,7 @@
-"""The benchmark's room runs again at more seeds (``vbn bench-localize --seeds``, issue 16).
+"""The benchmark's room runs again at more seeds (``vbn bench-localize --seeds``).
 
-The accuracy issue asks for its targets "measured over several seeds of each run, not
-one": one run's p95 moves by a fifth when a setting moves which features a frame finds.
+The accuracy targets are measured over several seeds of each run, not one: one run's
+p95 moves by a fifth when a setting moves which features a frame finds.
 ``--seeds 11,12`` renders every room run of the benchmark again with each seed, which
 draws the odometry's noise, the image effects and (as ``--path-seed``) the run's path,
 and localizes it against the database of the run it repeats:

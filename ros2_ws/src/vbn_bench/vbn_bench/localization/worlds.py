@@ -1,4 +1,4 @@
-"""The runs of the integrity benchmark: scenes, changed worlds, other days (issue 18).
+"""The runs of the integrity benchmark: scenes, changed worlds, other days.
 
 Per scene and seed, the runs of :data:`RUNS` through ``vbn render`` (a new path per
 seed, :func:`run_argv`); the database is built from the scene's exploration as it was:
@@ -43,7 +43,7 @@ UPDATE_FACTOR = 1.5
 #: update's exploration (the changed run keeps its people and light, and may pass
 #: where the world has less to see: no update can beat a rebuild by much there).
 REBUILD_FACTOR = 1.2
-#: The runs through a world that changed (the issue's 95 % posed, p95 5 cm).
+#: The runs through a world that changed (95 % posed, p95 5 cm).
 CHANGED_RUNS = ('changed', 'dim', 'bright', 'people', 'faults', 'faults_2hz')
 
 
@@ -127,7 +127,7 @@ def update_failures(updated: dict[str, Any], unchanged: dict[str, Any],
 
 
 def targets(run: str) -> dict[str, float]:
-    """Return the issue's targets of one run: the keys of ``IntegrityFigures`` checked."""
+    """Return the targets of one run: the keys of ``IntegrityFigures`` checked."""
     out: dict[str, float] = {'far': 0.0, 'startup_frames': 3.0}
     if run in CHANGED_RUNS or run in ('unchanged', 'updated'):
         out.update(posed=0.95, p95_m=0.05)

@@ -1,4 +1,4 @@
-"""The fisheye camera: CameraInfo ``'equidistant'`` (issue 15; OpenCV's fisheye model).
+"""The fisheye camera: CameraInfo ``'equidistant'`` (OpenCV's fisheye model).
 
 A ray at angle ``theta`` from the optical axis (``z``) and azimuth ``phi`` about it
 (``atan2(Y, X)``) lands at ``u = cx + fx theta_d cos(phi)``, ``v = cy + fy theta_d

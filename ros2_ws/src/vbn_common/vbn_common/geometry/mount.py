@@ -1,4 +1,4 @@
-"""A camera mounted with pitch and roll: rays in the level camera frame (issue 15 item 2).
+"""A camera mounted with pitch and roll: rays in the level camera frame.
 
 The planar solvers of Chapter 7 assume a camera whose optical ``y`` axis is the world's
 downward vertical. A real mount pitches or rolls the camera by a degree or two (or on

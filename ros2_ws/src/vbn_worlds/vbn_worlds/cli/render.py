@@ -1,4 +1,4 @@
-"""``vbn render``: render a scene into an exploration or run bag (issue 4).
+"""``vbn render``: render a scene into an exploration or run bag.
 
 Example::
 

@@ -1,4 +1,4 @@
-"""Renderer of a scene's extruded walls through a panoramic or pinhole camera (issue 4).
+"""Renderer of a scene's extruded walls through a panoramic or pinhole camera.
 
 Core modules (no rclpy, no message types): :mod:`.textures` (wall textures),
 :mod:`.renderer` (ray casting, texture sampling, ground truth) and :mod:`.effects`

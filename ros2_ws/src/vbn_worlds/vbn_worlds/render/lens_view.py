@@ -1,4 +1,4 @@
-"""Rendering through a lens or a tilted mount: distortion, fisheyes, pitch (issue 15).
+"""Rendering through a lens or a tilted mount: distortion, fisheyes, pitch.
 
 The column renderer (:mod:`.renderer`) needs a camera in which a vertical wall line is
 one image column: an undistorted pinhole or the cylindrical panorama. A distorted

@@ -1,4 +1,4 @@
-"""A 2.5-D ray-casting renderer of a scene's extruded walls (issue 4; thesis Section 7.5).
+"""A 2.5-D ray-casting renderer of a scene's extruded walls (thesis Section 7.5).
 
 The floor plan's perimeter and obstacles become vertical walls of ``wall_height``
 metres between a floor and a ceiling plane; the camera sits at ``camera_height`` on
@@ -20,7 +20,7 @@ The floor and ceiling are flat-shaded by distance (featureless on purpose: the
 ground truth of :meth:`Renderer.pixel_to_wall_point` covers walls only). The same
 ray cast gives the ground truth: the 3-D point each pixel shows.
 
-:class:`Occluders` are what a world holds beyond its walls (issue 18): furniture lower
+:class:`Occluders` are what a world holds beyond its walls: furniture lower
 than the walls and people walking through the view, as vertical faces with a top
 height and a colour. A second ray cast against them paints, over the walls, the pixels
 where the nearest of them stands in front of the wall and below its top (one layer:

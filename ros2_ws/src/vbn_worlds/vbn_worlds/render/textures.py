@@ -176,7 +176,7 @@ def _plaster(rng: np.random.Generator, width: int, height: int, tpm: float) -> n
 
 @dataclass(frozen=True)
 class Appearance:
-    """How the walls look on the day of a recording (a world that changed, issue 18).
+    """How the walls look on the day of a recording (a world that changed).
 
     The default is the scene as explored. Light: every wall's shade is multiplied by
     ``gain`` and by ``1 + side_strength * cos(angle between the wall's normal and the

@@ -1,4 +1,4 @@
-"""Bag synthesis: exploration grids, run trajectories, odometry and bag writing (issue 4).
+"""Bag synthesis: exploration grids, run trajectories, odometry and bag writing.
 
 Core modules (no rclpy): :mod:`.grid` (exploration poses), :mod:`.trajectory`
 (smooth runs, kidnapped variant), :mod:`.odometry` (wheel odometry with seeded

@@ -1,4 +1,4 @@
-"""Turn renders into rosbag2 MCAP bags: exploration, run and kidnapped run (issue 4).
+"""Turn renders into rosbag2 MCAP bags: exploration, run and kidnapped run.
 
 Topics and frames (fixed by the design):
 

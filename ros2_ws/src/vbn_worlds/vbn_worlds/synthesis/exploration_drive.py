@@ -1,6 +1,6 @@
 """An exploration driven as a robot drives it: stop and go between the grid positions.
 
-Issue 17, point 1. The plain exploration bag places the camera at every grid position
+The plain exploration bag places the camera at every grid position
 (:func:`~.grid.exploration_poses`) with its pose from the ground truth. A real robot
 drives there: it turns on the spot towards the next position, drives straight to it,
 stops, turns through the image headings (pinhole and fisheye explorations; a panorama

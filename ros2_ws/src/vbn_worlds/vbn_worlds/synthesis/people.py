@@ -1,4 +1,4 @@
-"""People walking through a run's view: occluders that move (issue 18).
+"""People walking through a run's view: occluders that move.
 
 Each walker goes from one random free point to the next along straight lines that keep
 ``clearance`` from every wall, at a walking speed of its own (0.8 to 1.3 m/s), pausing

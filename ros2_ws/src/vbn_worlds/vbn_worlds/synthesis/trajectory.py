@@ -1,8 +1,8 @@
 """Smooth run trajectories through a scene, and the kidnapped-robot variant.
 
 A run drives a differential-drive robot forward along a smooth path that contains
-turns, a loop close to the walls and a pass through the middle of the free space
-(issue 4). The path is planned on a fine free-space lattice (8-connected, edges
+turns, a loop close to the walls and a pass through the middle of the free space.
+The path is planned on a fine free-space lattice (8-connected, edges
 weighted to stay away from walls), through waypoints chosen from the scene: a
 ring of poses at ``near_wall`` metres from the nearest wall, ordered by angle
 around the free space's centroid, then the two most open poses that are furthest

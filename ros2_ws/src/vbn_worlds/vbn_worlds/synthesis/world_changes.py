@@ -1,4 +1,4 @@
-"""A world that changed after its exploration: furniture, posters, light, people (issue 18).
+"""A world that changed after its exploration: furniture, posters, light, people.
 
 A database describes the building on the day of its exploration; the robot runs on
 other days. :class:`WorldChanges` says what differs on the day of a run:

@@ -1,1 +1,1 @@
-"""Image poses from the images and the odometry (thesis Section 6.1, issue 17)."""
+"""Image poses from the images and the odometry (thesis Section 6.1)."""

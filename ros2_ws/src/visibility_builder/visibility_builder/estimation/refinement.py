@@ -1,6 +1,6 @@
 """Bundle adjustment of the estimated poses with odometry factors (beyond the thesis).
 
-Issue 17, point 4. Section 6.1 fits rotations, then positions, to pairwise motions: each
+Section 6.1 fits rotations, then positions, to pairwise motions: each
 pair's motion is a summary of its matches, and the two fits never see the points
 themselves. The refinement minimises the reprojection errors of every track (a chain
 of pairwise inlier matches: a connected component, at most one feature per image) over all

@@ -1,4 +1,4 @@
-"""The figures of ``vbn estimate-poses --report DIR`` (issue 17, point 2).
+"""The figures of ``vbn estimate-poses --report DIR``.
 
 - ``view_graph.png``: the places at their estimated positions, the pairs of views that
   measured a direction between two places (kept by the fits: grey; dropped: red) and the
