@@ -37,6 +37,12 @@ COMMANDS: dict[str, Callable[[Any], None]] = {
 }
 
 
+def _register(name: str) -> Callable[[Any], None]:
+    if name not in COMMANDS:
+        raise BenchError(f'no command {name!r} for a benchmark ({", ".join(COMMANDS)})')
+    return COMMANDS[name]
+
+
 def _child(argv: list[str], log: str, append: bool, env: dict[str, str]) -> None:
     os.environ.update(env)
     raise SystemExit(run_registered(COMMANDS[argv[0]], argv, log, append))
@@ -50,8 +56,7 @@ def start_isolated(argv: Sequence[str], log: str | Path, *, append: bool = False
         The started process (its ``pid`` for a memory sampler, ``exitcode`` once joined).
     """
     argv = list(argv)
-    if argv[0] not in COMMANDS:
-        raise BenchError(f'no command {argv[0]!r} for a benchmark ({", ".join(COMMANDS)})')
+    _register(argv[0])
     process = multiprocessing.get_context('spawn').Process(
         target=_child, args=(argv, str(log), append, dict(env or {})),
         name=f'vbn {argv[0]}')
@@ -74,8 +79,7 @@ def run_command(argv: Sequence[str], log: str | Path, *, append: bool = True,
         BenchError: ``vbn NAME failed (exit N); see LOG`` when it did not exit with 0.
     """
     argv = list(argv)
-    if argv[0] not in COMMANDS:
-        raise BenchError(f'no command {argv[0]!r} for a benchmark ({", ".join(COMMANDS)})')
+    register = _register(argv[0])
     if isolated:
         process = start_isolated(argv, log, append=append, env=env)
         try:
@@ -88,6 +92,6 @@ def run_command(argv: Sequence[str], log: str | Path, *, append: bool = True,
     else:
         if env:
             raise BenchError('an environment needs an isolated command')
-        code = run_registered(COMMANDS[argv[0]], argv, log, append)
+        code = run_registered(register, argv, log, append)
     if code != 0:
         raise BenchError(f'vbn {argv[0]} failed (exit {code}); see {log}')

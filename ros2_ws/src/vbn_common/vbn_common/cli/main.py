@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stderr, redirect_stdout
 from importlib import metadata
 import logging
 import os
@@ -85,7 +85,12 @@ def run_registered(register: Callable[[Any], None], argv: Sequence[str],
 
 @contextmanager
 def _redirected(output: str | Path | None, append: bool) -> Iterator[None]:
-    """Point file descriptors 1 and 2 at ``output`` for the block (nothing if ``None``)."""
+    """Point file descriptors 1 and 2, and ``sys.stdout`` and ``sys.stderr``, at ``output``.
+
+    The descriptors take what worker processes and C libraries print; the Python streams
+    what this process prints where they are not the descriptors' (under pytest's capture).
+    Nothing happens for ``None``.
+    """
     if output is None:
         yield
         return
@@ -94,11 +99,14 @@ def _redirected(output: str | Path | None, append: bool) -> Iterator[None]:
     saved = os.dup(1), os.dup(2)
     target = os.open(output, os.O_WRONLY | os.O_CREAT | (os.O_APPEND if append else os.O_TRUNC),
                      0o666)
+    stream = os.fdopen(os.dup(target), 'a', buffering=1)
     try:
         os.dup2(target, 1)
         os.dup2(target, 2)
-        yield
+        with redirect_stdout(stream), redirect_stderr(stream):
+            yield
     finally:
+        stream.close()
         sys.stdout.flush()
         sys.stderr.flush()
         os.dup2(saved[0], 1)
