@@ -198,10 +198,20 @@ def _test_imports(package: str) -> set[str]:
 
 
 @pytest.mark.parametrize('package', PROJECT)
-def test_package_xml_declares_what_the_tests_import(package: str) -> None:
+def test_package_xml_declares_no_project_package_for_the_tests(package: str) -> None:
+    # colcon orders packages by their test dependencies too, and a test of a lower package
+    # that renders a world or builds a database (vbn_common's tests import landmark_db,
+    # the localizer's the builder and the benchmarks) would make the order a cycle: the
+    # tests run in the whole built workspace instead, and a package's own code keeps the
+    # rules above.
     root = ET.parse(SRC / package / 'package.xml').getroot()
-    declared = {e.text for e in root.findall('test_depend')} & set(PROJECT)
-    assert declared == _test_imports(package) - ALLOWED[package]
+    assert {e.text for e in root.findall('test_depend')} & set(PROJECT) == set()
+
+
+def test_some_tests_do_stand_on_higher_packages() -> None:
+    # Why the rule above is needed: without it colcon would find a cycle.
+    assert 'landmark_db' in _test_imports('vbn_common')
+    assert 'visibility_builder' in _test_imports('landmark_localizer')
 
 
 def test_the_rules_catch_a_wrong_import(tmp_path: Path) -> None:
